@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import enum
 import math
+import struct
 from dataclasses import dataclass
 
 from sitl.config import AutopilotConfig, AutopilotParams, RoverMode
@@ -57,6 +58,7 @@ PARAM_FIELDS = {
     "LOIT_RADIUS": "loiter_radius_m",
     "LOIT_SPEED_GAIN": "loiter_speed_gain",
     "LOIT_TYPE": "loiter_type",
+    "ATC_DECEL_MAX": "decel_max_mps2",
 }
 
 
@@ -95,6 +97,8 @@ class Frame(enum.IntEnum):
     GLOBAL_TERRAIN_ALT_INT = 11
 
 
+NEAR_ZONE_RADII = 4.0  # loiter holds its heading within this many LOIT_RADIUS of the point
+
 # POSITION_TARGET_TYPEMASK bits: a set bit means "ignore this field".
 POS_IGNORE = 0x7  # X, Y, Z
 VEL_IGNORE = 0x38  # VX, VY, VZ
@@ -119,7 +123,7 @@ class ParamStore:
         """Set a known parameter (finite values only); False for an unknown name or bad value."""
         if name not in self._values or not math.isfinite(value):
             return False
-        self._values[name] = float(value)
+        self._values[name] = struct.unpack("<f", struct.pack("<f", value))[0]  # stored as float32, as sent
         return True
 
     def __contains__(self, name: object) -> bool:
@@ -267,7 +271,7 @@ class Autopilot:
             self.mode = mode
             self.target = None
             self.control = ControllerState(desired_heading=nav.psi)
-            self.hold_point = (nav.n, nav.e)
+            self.hold_point = self.stopping_point(nav)
         return MavResult.ACCEPTED
 
     def arm(self, arm: bool, force: bool, nav: Navigation) -> MavResult:
@@ -291,6 +295,13 @@ class Autopilot:
         self.home_changed = True
         self.say(Severity.INFO, "Throttle armed")
         return MavResult.ACCEPTED
+
+    def stopping_point(self, nav: Navigation) -> tuple[float, float]:
+        """Where the boat can stop decelerating at ATC_DECEL_MAX: position + v |v| / (2 a) [m]."""
+        decel = max(self.params.get("ATC_DECEL_MAX"), 1e-3)
+        speed = math.hypot(nav.vn, nav.ve)
+        k = speed / (2.0 * decel)
+        return nav.n + k * nav.vn, nav.e + k * nav.ve
 
     def set_home(self, n: float, e: float) -> None:
         self.home = (n, e)
@@ -325,7 +336,7 @@ class Autopilot:
         ):
             self.say(Severity.WARNING, f"target not received last {timeout:.1f} secs, stopping")
             self.target = None
-            self.hold_point = (nav.n, nav.e)  # a boat holds position where it stops
+            self.hold_point = self.stopping_point(nav)  # a boat holds position where it can stop
         target = self.target
         if self.mode == MODE_NUMBERS["GUIDED"] and target is not None:
             if target.kind == TargetKind.HEADING_SPEED:
@@ -342,10 +353,11 @@ class Autopilot:
             if point is None:
                 point = self.hold_point = (nav.n, nav.e)
             steering, throttle = self._hold(point, p.get("WP_SPEED"), nav, dt)
-        # Skid-steer mix, steering first: throttle gives way when the sum saturates.
-        steering = min(1.0, max(-1.0, steering))
-        if abs(throttle) + abs(steering) > 1.0:
-            throttle = math.copysign(1.0 - abs(steering), throttle)
+        # Skid-steer mix; when throttle and steering together saturate, both are scaled back fairly.
+        saturation = abs(throttle) + abs(steering)
+        if saturation > 1.0:
+            throttle /= saturation
+            steering /= saturation
         ctl.throttle, ctl.steering = throttle, steering
         self.commands = (throttle + steering, throttle - steering)
         return self.commands
@@ -353,15 +365,21 @@ class Autopilot:
     def _hold(
         self, point: tuple[float, float], speed_cap: float, nav: Navigation, dt: float
     ) -> tuple[float, float]:
-        """ArduPilot Rover loiter: head for the point (forward or reverse) outside LOIT_RADIUS."""
+        """ArduPilot Rover loiter: head for the point (forward or reverse) outside LOIT_RADIUS.
+
+        Within NEAR_ZONE_RADII x LOIT_RADIUS the heading is held and only the distance along it is
+        closed, so sensor noise on a short bearing does not saturate the steering.
+        """
         p = self.params
         dn, de = point[0] - nav.n, point[1] - nav.e
         distance = math.hypot(dn, de)
         radius = p.get("LOIT_RADIUS")
         ctl = self.control
-        if distance <= radius:
-            speed = 0.0
+        if distance <= NEAR_ZONE_RADII * radius:
+            # near the point the bearing is noise: keep the heading, close the along-heading distance
             heading = ctl.desired_heading if ctl.desired_heading is not None else nav.psi
+            along = dn * math.cos(nav.psi) + de * math.sin(nav.psi)
+            speed = math.copysign(max(abs(along) - radius, 0.0) * p.get("LOIT_SPEED_GAIN"), along)
         else:
             speed = min((distance - radius) * p.get("LOIT_SPEED_GAIN"), speed_cap)
             heading = math.atan2(de, dn)

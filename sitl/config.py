@@ -163,6 +163,7 @@ class AutopilotParams:
     loiter_radius_m: float  # LOIT_RADIUS: no correction inside this distance [m]
     loiter_speed_gain: float  # LOIT_SPEED_GAIN: distance beyond the radius -> speed [1/s]
     loiter_type: float  # LOIT_TYPE: 0 forward or reverse, 1 forward only, 2 reverse only [-]
+    decel_max_mps2: float  # ATC_DECEL_MAX: deceleration used to place the stopping point [m/s^2]
 
 
 @dataclass(frozen=True)

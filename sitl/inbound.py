@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,6 +43,7 @@ class Channel:
     writer: TelemetryWriter
     schedule: StreamSchedule
     origin: OriginConfig
+    publish: Callable[[], None]  # sends queued STATUSTEXTs on all links (they precede an ACK)
     last_rejection_text_t: float = field(default=-math.inf)
 
     def send_due(self) -> None:
@@ -72,6 +74,7 @@ def _command(channel: Channel, msg: Any) -> None:
     boat = channel.boat
     command = msg.command
     result = _run_command(channel, command, msg)
+    channel.publish()
     channel.writer.mav.command_ack_send(
         command, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
     )
@@ -146,6 +149,7 @@ def _set_mode(channel: Channel, msg: Any) -> None:
         result = boat.autopilot.set_mode(msg.custom_mode, boat.navigation())
     else:
         result = MavResult.UNSUPPORTED
+    channel.publish()
     # ArduPilot acknowledges SET_MODE with a COMMAND_ACK whose command is the message id (11)
     channel.writer.mav.command_ack_send(
         mavlink.MAVLINK_MSG_ID_SET_MODE, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()

@@ -117,7 +117,7 @@ class Simulation:
             )
             schedule = StreamSchedule(intervals, 1.0 / self.cfg.mavlink.heartbeat_hz, self.t)
             self.channels[(id(link), boat.sysid)] = inbound.Channel(
-                boat, link, writer, schedule, self.cfg.origin
+                boat, link, writer, schedule, self.cfg.origin, self._publish
             )
 
     # ---- queries ----------------------------------------------------------------------------------
