@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import statistics
 
@@ -24,7 +25,7 @@ def test_heartbeat_identifies_a_disarmed_rover_boat(gcs_and_sim):
     # 1 Hz in simulated time
     stamps = []
     gcs.run_for(5.0, lambda m: stamps.append(gcs.t) if m.get_type() == "HEARTBEAT" else None)
-    gaps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
+    gaps = [b - a for a, b in itertools.pairwise(stamps)]
     assert len(gaps) >= 3 and all(abs(g - 1.0) < 0.15 for g in gaps), gaps
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-
 from conftest import sim_config
+
 from sitl.runner import Simulation
 
 mavsdk = pytest.importorskip("mavsdk.asyncio", reason="mavsdk is in the dev extra")
