@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import sim_config
+from sitl_gcs import sim_config
 
 from sitl.boat import Boat
 from sitl.flow import Flow

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import sim_config
+from sitl_gcs import sim_config
 
 from sitl.config import DoubleGyreConfig, VortexConfig
 from sitl.flow import Flow, OrnsteinUhlenbeck2D, double_gyre_velocity, lamb_oseen_velocity, uniform_velocity

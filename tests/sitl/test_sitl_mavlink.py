@@ -6,7 +6,7 @@ import itertools
 import math
 import statistics
 
-from conftest import VELOCITY_MASK, mavlink
+from sitl_gcs import VELOCITY_MASK, mavlink
 
 GUIDED, HOLD, LOITER, MANUAL = 15, 4, 5, 0
 SOUTH_END = {"start_poses": [[0.4, 1.5, 0.0]]}  # room to run north in the 4.5 m tank

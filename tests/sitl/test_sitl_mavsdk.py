@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from conftest import sim_config
+from sitl_gcs import sim_config
 
 from sitl.runner import Simulation
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 import socket
 
-from conftest import Gcs, mavlink, mavutil, sim_config
+from sitl_gcs import Gcs, mavlink, mavutil, sim_config
 
 from sitl.runner import Simulation, SimulationThread
 
