@@ -250,7 +250,8 @@ def test_arming_needs_a_position_estimate(gcs_and_sim):
 
 
 def test_wall_contact_is_reported(gcs_and_sim):
-    gcs, _ = gcs_and_sim({"start_poses": [[3.9, 1.5, 0.0]]})
+    records: list[dict] = []
+    gcs, _ = gcs_and_sim({"start_poses": [[3.9, 1.5, 0.0]]}, records)
     gcs.set_mode(GUIDED)
     gcs.arm()
     gcs.wait(
@@ -260,6 +261,8 @@ def test_wall_contact_is_reported(gcs_and_sim):
     )
     pos = gcs.wait_type("LOCAL_POSITION_NED")
     assert 4.2 < pos.x <= 4.31  # stopped at the north wall minus half a hull length
+    walls = [r for r in records if r["kind"] == "wall"]
+    assert len(walls) == 1 and walls[0]["walls"] == ["north"] and walls[0]["n"] == 4.3
 
 
 def test_garbage_bytes_are_dropped_and_counted(gcs_and_sim):
@@ -287,3 +290,48 @@ def test_speedup_20_runs_at_least_16x_wall_time(gcs_and_sim):
     gcs.run_for(40.0)
     ratio = (gcs.t - t0_sim) / (time.monotonic() - t0_wall)
     assert ratio >= 16.0, f"simulated/wall = {ratio:.1f}"
+
+
+def test_global_int_setpoints_and_command_int(gcs_and_sim):
+    records: list[dict] = []
+    gcs, _ = gcs_and_sim(SOUTH_END, records)
+    gcs.mav.request_data_stream_send(1, 1, mavlink.MAV_DATA_STREAM_POSITION, 10, 1)
+    mode = mavlink.MAV_CMD_DO_SET_MODE
+    gcs.mav.command_int_send(
+        1, 1, 0, mode, 0, 0, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED, 0, 0, 0, 0, 0
+    )
+    ack = gcs.wait(lambda m: m.get_type() == "COMMAND_ACK" and m.command == mode, "COMMAND_INT ack")
+    assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+    gcs.arm()
+    here = gcs.wait_type("GLOBAL_POSITION_INT")
+    # a position 1 m north of the boat, as lat/lon: the boat drives there and holds it
+    goal_lat = here.lat + round(1.0 / 111195.0 * 1e7)
+    pos_only = 0b110111111000
+
+    def send_goal(m):
+        gcs.mav.set_position_target_global_int_send(
+            0,
+            1,
+            1,
+            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+            pos_only,
+            goal_lat,
+            here.lon,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+        )
+
+    gcs.run_for(1.0, send_goal)
+    gcs.run_for(14.0)
+    end = gcs.wait_type("LOCAL_POSITION_NED")
+    assert abs(end.x - (0.4 + 1.0)) < 0.1 and abs(end.y - 1.5) < 0.1
+    assert math.hypot(end.vx, end.vy) < 0.05
+    targets = [r["target"] for r in records if r["kind"] == "state" and r["target"]]
+    assert targets[-1]["kind"] == "position"
