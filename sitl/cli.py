@@ -95,13 +95,13 @@ def run(args: argparse.Namespace) -> int:
 async def serve(cfg: SitlConfig) -> int:
     sim = await Simulation.create(cfg)
     try:
+        loop = asyncio.get_running_loop()
+        with contextlib.suppress(NotImplementedError):  # no signal handlers on some platforms
+            loop.add_signal_handler(signal.SIGTERM, sim.stop)
         for sysid, addresses in sim.addresses().items():
             for address in addresses:
                 print(f"sitl: boat {sysid} mavlink {address}")
         print("sitl: ready", flush=True)
-        loop = asyncio.get_running_loop()
-        with contextlib.suppress(NotImplementedError):  # no signal handlers on some platforms
-            loop.add_signal_handler(signal.SIGTERM, sim.stop)
         await sim.run()
     finally:
         await sim.close()

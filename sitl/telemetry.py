@@ -178,6 +178,8 @@ class TelemetryWriter:
         )
 
     def global_position_int(self) -> None:
+        if self.boat.sensors.fix is None:
+            return  # no position estimate yet: ArduPilot sends no position either
         n, e, vn, ve = self._fix()
         lat, lon = ned_to_geodetic(n, e, self.origin)
         self.mav.global_position_int_send(
@@ -193,6 +195,8 @@ class TelemetryWriter:
         )
 
     def local_position_ned(self) -> None:
+        if self.boat.sensors.fix is None:
+            return
         n, e, vn, ve = self._fix()
         self.mav.local_position_ned_send(time_boot_ms(self.boat.t), n, e, 0.0, vn, ve, 0.0)
 

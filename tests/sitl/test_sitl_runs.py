@@ -91,3 +91,26 @@ def test_boats_sharing_one_link_answer_only_for_themselves():
             conn.close()
         positions = sim.call(lambda s: [b.state[1] for b in s.boats])
         assert positions[0] < positions[1] < positions[2]  # a row across the tank
+
+
+def test_simulator_process_serves_boats_at_chosen_poses():
+    from sitl.process import SimulatorProcess
+
+    overrides = {
+        "count": 2,
+        "speedup": 20.0,
+        "start_poses": [[1.0, 1.0, 90.0], [3.0, 2.0, 0.0]],
+        "mavlink": {"endpoints": ["tcpin:127.0.0.1:0"]},
+    }
+    with SimulatorProcess(overrides) as sim:
+        assert set(sim.addresses) == {1, 2}
+        _, host, port = sim.addresses[2][0].split(":")
+        conn = mavutil.mavlink_connection(f"tcp:{host}:{port}", source_system=255, source_component=190)
+        try:
+            gcs = Gcs(conn, target_system=2)
+            pos = gcs.wait_type("LOCAL_POSITION_NED", 3.0)
+            assert abs(pos.x - 3.0) < 0.02 and abs(pos.y - 2.0) < 0.02
+        finally:
+            conn.close()
+    assert sim.returncode == 0
+    assert any("stopped at t =" in line for line in sim.output)
