@@ -114,3 +114,16 @@ def test_simulator_process_serves_boats_at_chosen_poses():
             conn.close()
     assert sim.returncode == 0
     assert any("stopped at t =" in line for line in sim.output)
+
+
+def test_tcp_client_endpoint_connects_to_a_listening_ground_station():
+    listener = mavutil.mavlink_connection("tcpin:127.0.0.1:0", source_system=255, source_component=190)
+    try:
+        port = listener.listen.getsockname()[1]
+        cfg = sim_config({"mavlink": {"endpoints": [f"tcp:127.0.0.1:{port}"]}})
+        with SimulationThread(cfg):
+            gcs = Gcs(listener)
+            assert gcs.wait_type("HEARTBEAT", 3.0).type == mavlink.MAV_TYPE_SURFACE_BOAT
+            assert gcs.set_mode(4).result == mavlink.MAV_RESULT_ACCEPTED
+    finally:
+        listener.close()
