@@ -80,6 +80,7 @@ class LinkStats:
     messages_out: int = 0
     garbage_bytes: int = 0  # bytes dropped because they were not valid MAVLink (bad CRC, noise)
     bad_messages: int = 0  # frames or byte runs rejected by the decoder
+    unknown_messages: int = 0  # frames with a message id outside the ardupilotmega dialect, ignored
     send_errors: int = 0  # transport errors (e.g. nobody listening on a udpout port)
     dropped_out: int = 0  # messages not sent because a TCP client stopped reading
 
@@ -102,9 +103,16 @@ class _Peer:
         self.transport = transport
         self.decoder = new_decoder()
 
-    def feed(self, data: bytes) -> None:
+    def feed(self, data: bytes, datagram: bool = False) -> None:
+        """Decode bytes; a datagram starts afresh (a frame never spans UDP datagrams)."""
         link = self.link
         link.stats.bytes_in += len(data)
+        if datagram:
+            leftover = self.decoder.buf_len()
+            if leftover > 0:  # the tail of a truncated frame in an earlier datagram
+                link.stats.bad_messages += 1
+                link.stats.garbage_bytes += leftover
+                self.decoder = new_decoder()
         try:
             messages = self.decoder.parse_buffer(data) or []
         except (mavlink.MAVError, struct.error, ValueError, IndexError) as exc:
@@ -114,9 +122,13 @@ class _Peer:
             self.decoder = new_decoder()
             return
         for msg in messages:
-            if msg.get_type() == "BAD_DATA":
+            kind = msg.get_type()
+            if kind == "BAD_DATA":
                 link.stats.bad_messages += 1
                 link.stats.garbage_bytes += len(msg.data)
+                continue
+            if kind.startswith("UNKNOWN_"):  # an id outside the dialect: no CRC check possible, ignored
+                link.stats.unknown_messages += 1
                 continue
             link.stats.messages_in += 1
             link.on_message(link, msg)
@@ -130,7 +142,7 @@ class _UdpProtocol(asyncio.DatagramProtocol):
         link = self.link
         if link.endpoint.kind == "udpin":
             link._udp_peers.add(addr)
-        link._udp_peer.feed(data)
+        link._udp_peer.feed(data, datagram=True)
 
     def error_received(self, exc: Exception) -> None:
         self.link.stats.send_errors += 1

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import random
 import statistics
 
 from sitl_gcs import VELOCITY_MASK, mavlink
@@ -275,11 +276,23 @@ def test_garbage_bytes_are_dropped_and_counted(gcs_and_sim):
     bad_crc = bytearray(gcs.mav.heartbeat_encode(6, 8, 0, 0, 0).pack(gcs.mav))
     bad_crc[-1] ^= 0xFF
     sock.sendto(bytes(bad_crc), addr)
+    rng = random.Random(7)  # corrupted copies of real frames: flipped bytes, truncations
+    frame = gcs.mav.command_long_encode(1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 1, HOLD, 0, 0, 0, 0, 0).pack(
+        gcs.mav
+    )
+    for _ in range(500):
+        corrupt = bytearray(frame)
+        if rng.random() < 0.5:
+            corrupt[rng.randrange(10, len(corrupt))] ^= 1 + rng.randrange(255)
+        else:
+            corrupt = corrupt[: rng.randrange(1, len(corrupt))]
+        sock.sendto(bytes(corrupt), addr)
     ack = gcs.set_mode(GUIDED)  # the link still works
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED
     stats = sim.call(lambda s: s.links[0].stats)
     assert stats.garbage_bytes >= 5 * len(junk)
-    assert stats.bad_messages >= 1
+    assert stats.bad_messages >= 500
+    assert gcs.wait_type("HEARTBEAT").custom_mode == GUIDED  # no corrupted HOLD got through
 
 
 def test_speedup_20_runs_at_least_16x_wall_time(gcs_and_sim):
