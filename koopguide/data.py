@@ -216,18 +216,29 @@ def check_length(demos: Demonstrations, every: int, horizon: int = 1) -> None:
             )
 
 
-def pairs(demos: Demonstrations, every: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One-step pairs ``(X, Y, is_last)``: X, Y ``(P, d)`` consecutive sub-sampled points.
+def pairs(demos: Demonstrations, every: int, tangent_blend: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One-step pairs ``(X, Y, is_last)``: X, Y ``(P, d)`` from consecutive sub-sampled points.
 
-    ``is_last`` ``(P,)`` marks each demonstration's final pair (the one that lands on its end point).
+    ``Y = X + (1 - beta) (x_next - X) + beta * every * v(X)`` with ``beta = tangent_blend``: 0 is the
+    paper's target (the chord to the next sub-sampled point); towards 1 the target displacement
+    follows the demonstration's instantaneous velocity ``v`` at ``X`` (central differences of the raw
+    samples). A field integrated in small Euler steps travels along its velocity, so a pure chord
+    target makes it cut corners and lag on curves. Each demonstration's final pair keeps its chord,
+    so it lands exactly on the end point. ``is_last`` ``(P,)`` marks those final pairs.
     """
+    if not 0.0 <= tangent_blend <= 1.0:
+        raise ValueError(f"tangent_blend must be in [0, 1], got {tangent_blend}")
     check_length(demos, every)
     xs, ys, last = [], [], []
     for traj in demos.trajectories:
-        pts = subsample(traj, every)
-        xs.append(pts[:-1])
-        ys.append(pts[1:])
-        flag = np.zeros(len(pts) - 1, dtype=bool)
+        idx = subsample(np.arange(traj.shape[0]), every)
+        x, chord = traj[idx[:-1]], traj[idx[1:]] - traj[idx[:-1]]
+        tangent = every * np.gradient(traj, axis=0)[idx[:-1]]
+        step = (1.0 - tangent_blend) * chord + tangent_blend * tangent
+        step[-1] = chord[-1]
+        xs.append(x)
+        ys.append(x + step)
+        flag = np.zeros(len(idx) - 1, dtype=bool)
         flag[-1] = True
         last.append(flag)
     return np.concatenate(xs), np.concatenate(ys), np.concatenate(last)

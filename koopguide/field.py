@@ -124,11 +124,10 @@ class FlowField:
         return np.asarray(self.meta["bounds_lo"], dtype=float), np.asarray(self.meta["bounds_hi"], dtype=float)
 
     def _as_batch(self, X: np.ndarray) -> np.ndarray:
-        if X.ndim == 1:
-            X = X[None]
-        if X.ndim != 2 or X.shape[1] != self.dim:
+        batch = X[None] if X.ndim == 1 else X
+        if batch.ndim != 2 or batch.shape[1] != self.dim:
             raise ValueError(f"expected a state of shape ({self.dim},) or (N, {self.dim}), got {X.shape}")
-        return X
+        return batch
 
     def __repr__(self) -> str:
         return (f"FlowField(dim={self.dim}, nu={self.nu}, rank={self.rank}, goal={self.goal.tolist()}, "

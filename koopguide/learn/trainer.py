@@ -63,12 +63,13 @@ class OptimConfig:
 
 @dataclass(frozen=True)
 class StabilityConfig:
-    max_spectral_radius: float  # after training, eigenvalues of K above this are scaled onto it
+    max_spectral_radius: float | None  # after training, eigenvalues of K above this are scaled onto it
 
 
 @dataclass(frozen=True)
 class TrainConfig:
     subsample_every: int  # raw samples per learned step (LASA default 40)
+    tangent_blend: float  # 0: target = next sub-sampled point (paper); 1: x + every * demo velocity
     threads: int  # torch CPU threads (0: leave torch's default)
     model: ModelConfig
     loss: LossConfig
@@ -104,7 +105,7 @@ def train(demos: demo_data.Demonstrations, cfg: TrainConfig, seed: int,
     rng = np.random.default_rng(seed)
     dtype = torch.float32
 
-    x_np, y_np, last_np = demo_data.pairs(demos, cfg.subsample_every)
+    x_np, y_np, last_np = demo_data.pairs(demos, cfg.subsample_every, cfg.tangent_blend)
     x = torch.as_tensor(x_np, dtype=dtype)
     y = torch.as_tensor(y_np, dtype=dtype)
     # Target noise (not on each demonstration's final pair, which must land on the goal).
@@ -172,7 +173,8 @@ def train(demos: demo_data.Demonstrations, cfg: TrainConfig, seed: int,
         final_k = koopman_loss(model, x, y).item()
     W, b, A, B = (p.detach().to(torch.float64).numpy().copy() for p in (model.W, model.b, model.A, model.B))
     rho_before = spectral_radius(A, B)
-    A = project_spectrum(A, B, cfg.stability.max_spectral_radius)
+    if cfg.stability.max_spectral_radius is not None:
+        A = project_spectrum(A, B, cfg.stability.max_spectral_radius)
     info = {
         "seed": seed,
         "steps": steps,
@@ -181,7 +183,7 @@ def train(demos: demo_data.Demonstrations, cfg: TrainConfig, seed: int,
         "final_koopman_loss": final_k,
         "rho_trained": rho_before,
         "rho": spectral_radius(A, B),
-        "torch_version": torch.__version__,
+        "torch_version": str(torch.__version__),
     }
     return TrainedField(W=W, b=b, A=A, B=B, goal=demos.goal.copy(), goal_centred=cfg.model.goal_centred,
                         substeps=cfg.subsample_every, info=info)
@@ -232,7 +234,8 @@ def _check(cfg: TrainConfig) -> None:
         problems.append(f"loss.horizon must be >= 1, got {cfg.loss.horizon}")
     if cfg.loss.divergence_points < 1:
         problems.append(f"loss.divergence_points must be >= 1, got {cfg.loss.divergence_points}")
-    if not 0 < cfg.stability.max_spectral_radius < 1:
+    rho_max = cfg.stability.max_spectral_radius
+    if rho_max is not None and not 0 < rho_max < 1:
         problems.append(f"stability.max_spectral_radius must be in (0, 1), got {cfg.stability.max_spectral_radius}")
     if problems:
         raise ValueError("invalid training configuration: " + "; ".join(problems))

@@ -1,0 +1,136 @@
+import pickle
+import subprocess
+import sys
+import zipfile
+
+import numpy as np
+import pytest
+import torch
+
+import koopguide
+from koopguide import ModelFileError, modelfile
+from koopguide.commands_learn import save
+from koopguide.learn.model import FourierKoopman
+from tests.learn.conftest import small_config
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory, small_trained, zshape):
+    path = tmp_path_factory.mktemp("m") / "zshape.pt"
+    save(path, small_trained, zshape, small_config())
+    return path
+
+
+def test_round_trip_and_numpy_field_matches_the_torch_model(saved, small_trained):
+    field = koopguide.load_field(saved)
+    assert field.dim == 2 and field.substeps == 40 and field.nu == 256 and field.rank == 16
+    np.testing.assert_array_equal(field.goal, small_trained.goal)
+    model = FourierKoopman(2, 256, 16, torch.as_tensor(small_trained.goal), True, torch.Generator())
+    with torch.no_grad():
+        for name in ("W", "b", "A", "B"):
+            getattr(model, name).copy_(torch.as_tensor(getattr(small_trained, name)))
+    X = np.random.default_rng(1).uniform(-50, 50, (64, 2))
+    np.testing.assert_allclose(field.step(X), model.step(torch.as_tensor(X)).detach().numpy(), rtol=1e-10, atol=1e-9)
+
+
+def test_torch_reads_the_file_with_weights_only(saved):
+    payload = torch.load(saved, weights_only=True)
+    assert payload["format"] == "koopguide-field" and payload["format_version"] == 1
+    weights, meta = modelfile.read(saved)
+    for name, arr in weights.items():
+        np.testing.assert_array_equal(payload["weights"][name].numpy(), arr)
+    assert meta["data"]["source"] == "lasa:Zshape" and len(meta["data"]["sha256"]) == 64
+    assert meta["hyperparameters"]["model"]["nu"] == 256
+
+
+def test_queries_accept_one_state_or_a_batch(saved):
+    field = koopguide.load_field(saved)
+    x = np.array([-30.0, 40.0])
+    assert field.step(x).shape == (2,)
+    assert field.step(np.stack([x, x])).shape == (2, 2)
+    np.testing.assert_allclose(field.velocity(x), field.step(x) - x)
+    with pytest.raises(ValueError, match=r"expected a state of shape \(2,\) or \(N, 2\), got \(3,\)"):
+        field.step(np.zeros(3))
+
+
+def test_rollouts_euler_and_koopman(saved):
+    field = koopguide.load_field(saved)
+    x0 = np.array([[-30.0, 40.0], [10.0, 5.0]])
+    whole = field.rollout(x0, 3)
+    assert whole.shape == (2, 4, 2)
+    np.testing.assert_allclose(whole[:, 1], field.step(x0))
+    np.testing.assert_allclose(whole[:, 2], field.step(field.step(x0)))
+    fine = field.rollout(x0, 40, substeps=40)
+    np.testing.assert_allclose(fine[:, 1], x0 + field.velocity(x0) / 40)
+    koop = field.rollout(x0, 5, method="koopman")
+    np.testing.assert_allclose(koop[:, 1], field.step(x0), atol=1e-9)  # first step is the same map
+    # the linear lifted system is stable: a long Koopman rollout decays onto the goal
+    far = field.rollout(x0, 3000, method="koopman")[:, -1]
+    np.testing.assert_allclose(far, np.broadcast_to(field.goal, far.shape), atol=1e-6)
+    with pytest.raises(ValueError, match="unknown rollout method 'rk4'"):
+        field.rollout(x0, 2, method="rk4")
+    with pytest.raises(ValueError, match="substeps must be a positive integer, got 0"):
+        field.rollout(x0, 2, substeps=0)
+
+
+def test_eigenvalues_are_the_full_spectrum_of_K(saved):
+    field = koopguide.load_field(saved)
+    lam = field.eigenvalues()
+    assert lam.shape == (field.nu + 2,) and np.iscomplexobj(lam)
+    K = field.A @ field.B.T
+    dense = np.linalg.eigvals(K)
+    top = np.sort(np.abs(dense))[::-1][: field.rank]
+    np.testing.assert_allclose(np.abs(lam[: field.rank]), top, rtol=1e-6, atol=1e-9)
+    assert np.abs(lam).max() < 1.0
+
+
+def test_query_side_does_not_import_torch(saved):
+    code = ("import sys, koopguide; f = koopguide.load_field(sys.argv[1]); f.velocity(f.goal + 1); "
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code, str(saved)], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_corrupt_truncated_wrong_kind_and_newer_files_are_refused(tmp_path, saved):
+    garbage = tmp_path / "garbage.pt"
+    garbage.write_bytes(b"\x00\x01 definitely not a model" * 10)
+    with pytest.raises(ModelFileError, match="not a torch zip archive"):
+        koopguide.load_field(garbage)
+
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(saved.read_bytes()[: saved.stat().st_size // 2])
+    with pytest.raises(ModelFileError, match=str(truncated)):
+        koopguide.load_field(truncated)
+
+    other = tmp_path / "other.pt"
+    torch.save({"state_dict": {"w": torch.zeros(3)}}, other)
+    with pytest.raises(ModelFileError, match="wrong kind of file"):
+        koopguide.load_field(other)
+
+    weights, meta = modelfile.read(saved)
+    newer = tmp_path / "newer.pt"
+    torch.save({"format": "koopguide-field", "format_version": 99,
+                "weights": {k: torch.as_tensor(v) for k, v in weights.items()}, "meta": meta}, newer)
+    with pytest.raises(ModelFileError, match="format version 99 is newer"):
+        koopguide.load_field(newer)
+
+    mismatched = tmp_path / "mismatched.pt"
+    modelfile.write(mismatched, {**weights, "A": weights["A"][:, :3]}, meta)
+    with pytest.raises(ModelFileError, match=r"weight A has shape \(258, 3\), expected \(258, 16\)"):
+        koopguide.load_field(mismatched)
+
+    with pytest.raises(ModelFileError, match="model file not found"):
+        koopguide.load_field(tmp_path / "nope.pt")
+
+
+class _Evil:
+    def __reduce__(self):
+        return (print, ("pwned",))
+
+
+def test_arbitrary_pickled_objects_are_refused_not_executed(tmp_path):
+    path = tmp_path / "evil.pt"
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("evil/data.pkl", pickle.dumps({"format": "koopguide-field", "x": _Evil()}))
+    with pytest.raises(ModelFileError, match="refusing to load builtins.print"):
+        koopguide.load_field(path)

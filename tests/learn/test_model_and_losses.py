@@ -1,0 +1,114 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from koopguide.learn import losses, trainer
+from koopguide.learn.model import FourierKoopman
+
+
+def make_model(goal_centred: bool, seed: int = 0, nu: int = 64, rank: int = 8) -> FourierKoopman:
+    gen = torch.Generator().manual_seed(seed)
+    goal = torch.tensor([1.5, -2.0], dtype=torch.float64)
+    model = FourierKoopman(2, nu, rank, goal, goal_centred, gen)
+    with torch.no_grad():  # larger frequencies than Xavier so the features really curve over [-10, 10]
+        model.W.mul_(8.0)
+    return model
+
+
+@torch.no_grad()
+def next_state_fd_trace(model: FourierKoopman, x: torch.Tensor, h: float = 1e-6) -> torch.Tensor:
+    out = []
+    for p in x:
+        tr = 0.0
+        for i in range(model.dim):
+            e = torch.zeros(model.dim, dtype=x.dtype)
+            e[i] = h
+            fp = model.step((p + e)[None])[0, i]
+            fm = model.step((p - e)[None])[0, i]
+            tr += float((fp - fm) / (2 * h))
+        out.append(tr)
+    return torch.tensor(out, dtype=x.dtype)
+
+
+@pytest.mark.parametrize("goal_centred", [False, True])
+def test_analytic_jacobian_trace_matches_finite_differences(goal_centred):
+    model = make_model(goal_centred)
+    x = torch.tensor([[0.3, -4.0], [7.5, 2.2], [-9.0, 9.0]], dtype=torch.float64)
+    np.testing.assert_allclose(model.jacobian_trace(x).detach(), next_state_fd_trace(model, x), rtol=1e-6, atol=1e-6)
+
+
+def test_divergence_loss_of_field_is_trace_minus_dimension():
+    model = make_model(False)
+    x = torch.tensor([[1.0, 2.0], [3.0, -1.0]], dtype=torch.float64)
+    trace = model.jacobian_trace(x)
+    field = losses.divergence_loss(model, x, losses.DivergenceOf.FIELD)
+    nxt = losses.divergence_loss(model, x, losses.DivergenceOf.NEXT_STATE)
+    assert float(field) == pytest.approx(float(torch.mean((trace - 2) ** 2)))
+    assert float(nxt) == pytest.approx(float(torch.mean(trace**2)))
+
+
+def test_goal_centred_lifting_makes_the_goal_an_exact_fixed_point_for_any_weights():
+    model = make_model(True, seed=3)
+    g = model.goal
+    assert torch.equal(model.lift(g), torch.zeros(1, 2 + model.nu, dtype=torch.float64))
+    assert torch.allclose(model.step(g), g, atol=0, rtol=0)
+    assert float(losses.goal_loss(model)) == 0.0
+
+
+def test_pair_losses_are_koopman_linearity_and_state_prediction():
+    model = make_model(False)
+    x = torch.tensor([[0.0, 1.0], [2.0, -3.0]], dtype=torch.float64)
+    y = x + 0.5
+    k, s = losses.pair_losses(model, x, y)
+    lifted_residual = model.lift(y) - (model.lift(x) @ model.B) @ model.A.T
+    assert float(k) == pytest.approx(float(torch.mean(lifted_residual**2)))
+    assert float(s) == pytest.approx(float(torch.mean((model.step(x) - y) ** 2)))
+
+
+def test_multistep_loss_with_horizon_one_equals_the_koopman_loss():
+    model = make_model(True)
+    w = torch.tensor([[[0.0, 1.0], [0.5, 0.7]], [[3.0, 3.0], [2.0, 2.5]]], dtype=torch.float64)
+    assert float(losses.multistep_loss(model, w)) == pytest.approx(float(losses.koopman_loss(model, w[:, 0], w[:, 1])))
+
+
+def test_spectral_projection_caps_rho_and_leaves_inner_eigenvalues_alone():
+    rng = np.random.default_rng(0)
+    A, B = rng.normal(size=(40, 6)), rng.normal(size=(40, 6)) * 0.5
+    lam = np.linalg.eigvals(B.T @ A)
+    assert np.abs(lam).max() > 1.0
+    A2 = trainer.project_spectrum(A, B, 0.9)
+    lam2 = np.linalg.eigvals(B.T @ A2)
+    assert np.abs(lam2).max() == pytest.approx(0.9, abs=1e-9)
+    inside = np.sort_complex(lam[np.abs(lam) <= 0.9])
+    kept = np.sort_complex(lam2[np.abs(lam2) < 0.9 - 1e-9])
+    np.testing.assert_allclose(kept, inside, atol=1e-8)
+    assert trainer.project_spectrum(A2, B, 0.95) is A2  # already inside: unchanged
+
+
+def test_training_is_deterministic_for_a_seed_and_differs_across_seeds(zshape):
+    from tests.learn.conftest import small_config
+
+    cfg = small_config(optim={"steps": 60})
+    a = trainer.train(zshape, cfg, seed=5)
+    b = trainer.train(zshape, cfg, seed=5)
+    c = trainer.train(zshape, cfg, seed=6)
+    for name in ("W", "b", "A", "B"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert not np.array_equal(a.A, c.A)
+
+
+def test_invalid_training_settings_are_refused_with_the_values():
+    from tests.learn.conftest import small_config
+
+    with pytest.raises(ValueError, match=r"max_spectral_radius must be in \(0, 1\), got 1.5"):
+        trainer.train(None, small_config(stability={"max_spectral_radius": 1.5}), seed=0)
+    with pytest.raises(ValueError, match=r"optim.lr must be > 0, got -1.0"):
+        trainer.train(None, small_config(optim={"lr": -1.0}), seed=0)
+
+
+def test_xavier_bounds_as_reference():
+    model = make_model(False, nu=100, rank=4)
+    bound = math.sqrt(6.0 / (102 + 4))
+    assert float(model.A.abs().max()) <= bound
