@@ -93,13 +93,15 @@ class FlowField:
                 out[:, k + 1] = X
         elif method == "koopman":
             if substeps not in (None, 1):
-                raise ValueError(f"method='koopman' propagates whole learned steps; substeps must be None, got {substeps}")
+                raise ValueError(
+                    f"method='koopman' propagates whole learned steps; substeps must be None, got {substeps}"
+                )
             z_r = self.lift(X) @ self.B  # (N, r): K^k z = A (B^T A)^(k-1) B^T z
-            core_T = self.B.T @ self.A  # r x r
+            core = self.B.T @ self.A  # (r, r)
             base = self.goal if self.goal_centred else 0.0
             for k in range(n):
                 out[:, k + 1] = z_r @ self._A_x_T + base
-                z_r = z_r @ core_T.T
+                z_r = z_r @ core.T
         else:
             raise ValueError(f"unknown rollout method {method!r}; use 'euler' or 'koopman'")
         return out

@@ -85,7 +85,8 @@ def _validate(path: Path, payload: Any) -> tuple[dict[str, np.ndarray], dict[str
         raise ModelFileError(f"{path}: format_version missing or not an integer: {version!r}")
     if version > FORMAT_VERSION:
         raise ModelFileError(
-            f"{path}: model format version {version} is newer than this koopguide reads ({FORMAT_VERSION}); upgrade koopguide"
+            f"{path}: model format version {version} is newer than this koopguide reads ({FORMAT_VERSION}); "
+            "upgrade koopguide"
         )
     weights, meta = payload.get("weights"), payload.get("meta")
     if not isinstance(weights, dict) or not isinstance(meta, dict):
@@ -100,7 +101,9 @@ def _validate(path: Path, payload: Any) -> tuple[dict[str, np.ndarray], dict[str
         arr = weights[name]
         if not isinstance(arr, np.ndarray) or arr.shape != shape:
             seen = getattr(arr, "shape", type(arr).__name__)
-            raise ModelFileError(f"{path}: weight {name} has shape {seen}, expected {shape} for dim={d} nu={nu} rank={r}")
+            raise ModelFileError(
+                f"{path}: weight {name} has shape {seen}, expected {shape} for dim={d} nu={nu} rank={r}"
+            )
         if not np.all(np.isfinite(arr)):
             raise ModelFileError(f"{path}: weight {name} holds non-finite values")
     if len(meta["goal"]) != d:

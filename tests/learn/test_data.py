@@ -88,10 +88,10 @@ def test_too_short_for_subsampling_names_the_demo(tmp_path):
 def test_unreadable_npy_and_missing_path(tmp_path):
     bad = tmp_path / "x.npy"
     bad.write_bytes(b"not numpy at all")
-    with pytest.raises(DemoDataError, match="not a readable .npy"):
+    with pytest.raises(DemoDataError, match=r"not a readable \.npy"):
         data.load_demos(bad)
     with pytest.raises(DemoDataError, match="no such file or folder"):
         data.load_demos(tmp_path / "missing")
     (tmp_path / "empty").mkdir()
-    with pytest.raises(DemoDataError, match="holds no .csv or .npy"):
+    with pytest.raises(DemoDataError, match=r"holds no \.csv or \.npy"):
         data.load_demos(tmp_path / "empty")

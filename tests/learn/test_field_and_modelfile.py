@@ -132,5 +132,5 @@ def test_arbitrary_pickled_objects_are_refused_not_executed(tmp_path):
     path = tmp_path / "evil.pt"
     with zipfile.ZipFile(path, "w") as zf:
         zf.writestr("evil/data.pkl", pickle.dumps({"format": "koopguide-field", "x": _Evil()}))
-    with pytest.raises(ModelFileError, match="refusing to load builtins.print"):
+    with pytest.raises(ModelFileError, match=r"refusing to load builtins\.print"):
         koopguide.load_field(path)

@@ -1,0 +1,99 @@
+"""The learning CLI end to end: real processes, real files, real LASA data, a short training budget."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+SMALL = "model:\n  nu: 256\n  rank: 16\noptim:\n  steps: 300\n"
+
+
+def koopguide(*args: str, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "koopguide", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=300)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("cli")  # the shipped defaults: the full budget, a few seconds
+    out = koopguide("train", "--lasa", "Sine", "-o", str(tmp / "sine.pt"), "--seed", "3")
+    assert out.returncode == 0, out.stderr
+    return tmp, out
+
+
+def test_train_reports_progress_with_loss_terms(trained):
+    _, out = trained
+    assert "step  2475/2475" in out.stderr and "koopman" in out.stderr and "divergence" in out.stderr
+    assert "wrote" in out.stderr
+
+
+def test_eval_json_has_the_documented_metrics(trained):
+    tmp, _ = trained
+    out = koopguide("eval", str(tmp / "sine.pt"), "--json", "--starts", "100")
+    assert out.returncode == 0, out.stderr
+    metrics = json.loads(out.stdout)  # stdout is pure JSON
+    for key in ("sea", "dtwd", "converged", "rho", "goal_fixed_point_err"):
+        assert key in metrics
+    assert metrics["goal_fixed_point_err"] == 0.0
+    assert metrics["rho"] < 1.0
+    assert metrics["starts"] == 100 and metrics["converged"] >= 95
+
+
+def test_plot_writes_a_png(trained):
+    tmp, _ = trained
+    out = koopguide("plot", str(tmp / "sine.pt"), "-o", str(tmp / "sine.png"))
+    assert out.returncode == 0, out.stderr
+    assert (tmp / "sine.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(
+    ("config_text", "message"),
+    [
+        ("model:\n  nuu: 3\n", "model.nuu: unknown key"),
+        ("optim:\n  steps: many\n", "optim.steps: expected an integer, got 'many'"),
+        ("loss:\n  divergence_of: trace\n", "loss.divergence_of: 'trace' (str) is not one of 'field', 'next_state'"),
+        ("model: [1, 2\n", "invalid YAML"),
+    ],
+)
+def test_bad_config_is_one_line_error_and_exit_2(tmp_path, config_text, message):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text(config_text)
+    out = koopguide("train", "--lasa", "Sine", "-o", str(tmp_path / "x.pt"), "--config", str(cfg))
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("koopguide: error: ") and message in lines[0], out.stderr
+    assert not (tmp_path / "x.pt").exists()
+
+
+def test_bad_inputs_exit_2_with_one_line(tmp_path):
+    (tmp_path / "junk.pt").write_bytes(b"junk")
+    cases = [
+        (("eval", str(tmp_path / "junk.pt")), "not a torch zip archive"),
+        (("eval", str(tmp_path / "missing.pt")), "model file not found"),
+        (("train", "--lasa", "Zhape", "-o", str(tmp_path / "m.pt")), "unknown LASA shape 'Zhape'"),
+        (("train", "--demos", str(tmp_path / "none"), "-o", str(tmp_path / "m.pt")), "no such file or folder"),
+    ]
+    for args, message in cases:
+        out = koopguide(*args)
+        assert out.returncode == 2, (args, out.stderr)
+        assert out.stderr.count("\n") == 1 and message in out.stderr, out.stderr
+
+
+def test_train_on_user_csv_demos_in_3d(tmp_path):
+    import numpy as np
+
+    t = np.linspace(0, 1, 201)[:, None]
+    for i in range(3):
+        start = np.array([10.0 + i, -5.0, 3.0 - i])
+        traj = start * (1 - t) ** 2  # straight-ish approach to the origin, slowing down
+        np.savetxt(tmp_path / f"demo{i}.csv", traj, delimiter=",", header="x,y,z", comments="")
+    cfg = tmp_path / "small.yaml"
+    cfg.write_text("subsample_every: 20\n" + SMALL)
+    out = koopguide("train", "--demos", str(tmp_path), "-o", str(tmp_path / "m3.pt"), "--config", str(cfg))
+    assert out.returncode == 0, out.stderr
+    out = koopguide("eval", str(tmp_path / "m3.pt"), "--json", "--starts", "50")
+    assert out.returncode == 0, out.stderr
+    metrics = json.loads(out.stdout)
+    assert metrics["sea"] is None  # SEA is 2-D only
+    assert metrics["converged"] == 50 and metrics["goal_fixed_point_err"] == 0.0
