@@ -45,8 +45,8 @@ def test_divergence_loss_of_field_is_trace_minus_dimension():
     trace = model.jacobian_trace(x)
     field = losses.divergence_loss(model, x, losses.DivergenceOf.FIELD)
     nxt = losses.divergence_loss(model, x, losses.DivergenceOf.NEXT_STATE)
-    assert float(field) == pytest.approx(float(torch.mean((trace - 2) ** 2)))
-    assert float(nxt) == pytest.approx(float(torch.mean(trace**2)))
+    assert field.item() == pytest.approx(torch.mean((trace - 2) ** 2).item())
+    assert nxt.item() == pytest.approx(torch.mean(trace**2).item())
 
 
 def test_goal_centred_lifting_makes_the_goal_an_exact_fixed_point_for_any_weights():
