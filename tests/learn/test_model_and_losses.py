@@ -54,7 +54,7 @@ def test_goal_centred_lifting_makes_the_goal_an_exact_fixed_point_for_any_weight
     g = model.goal
     assert torch.equal(model.lift(g), torch.zeros(1, 2 + model.nu, dtype=torch.float64))
     assert torch.allclose(model.step(g), g, atol=0, rtol=0)
-    assert float(losses.goal_loss(model)) == 0.0
+    assert losses.goal_loss(model).item() == 0.0
 
 
 def test_pair_losses_are_koopman_linearity_and_state_prediction():
@@ -63,14 +63,14 @@ def test_pair_losses_are_koopman_linearity_and_state_prediction():
     y = x + 0.5
     k, s = losses.pair_losses(model, x, y)
     lifted_residual = model.lift(y) - (model.lift(x) @ model.B) @ model.A.T
-    assert float(k) == pytest.approx(float(torch.mean(lifted_residual**2)))
-    assert float(s) == pytest.approx(float(torch.mean((model.step(x) - y) ** 2)))
+    assert k.item() == pytest.approx(torch.mean(lifted_residual**2).item())
+    assert s.item() == pytest.approx(torch.mean((model.step(x) - y) ** 2).item())
 
 
 def test_multistep_loss_with_horizon_one_equals_the_koopman_loss():
     model = make_model(True)
     w = torch.tensor([[[0.0, 1.0], [0.5, 0.7]], [[3.0, 3.0], [2.0, 2.5]]], dtype=torch.float64)
-    assert float(losses.multistep_loss(model, w)) == pytest.approx(float(losses.koopman_loss(model, w[:, 0], w[:, 1])))
+    assert losses.multistep_loss(model, w).item() == pytest.approx(losses.koopman_loss(model, w[:, 0], w[:, 1]).item())
 
 
 def test_spectral_projection_caps_rho_and_leaves_inner_eigenvalues_alone():
@@ -111,7 +111,7 @@ def test_invalid_training_settings_are_refused_with_the_values():
 def test_xavier_bounds_as_reference():
     model = make_model(False, nu=100, rank=4)
     bound = math.sqrt(6.0 / (102 + 4))
-    assert float(model.A.abs().max()) <= bound
+    assert model.A.abs().max().item() <= bound
 
 
 def test_multistep_training_path_runs_and_reports_its_term(zshape):
