@@ -103,12 +103,12 @@ def save(path: Path, trained, demos: data.Demonstrations, cfg) -> None:
 def training_demos(field: FlowField, override: str | None) -> data.Demonstrations:
     """The demonstrations to compare with: ``override``, else the model's own training data."""
     if override is not None:
-        return data.load_demos(override) if not override.startswith("lasa:") else data.load_lasa(override[5:])
+        return data.load_source(override)
     summary = field.meta.get("data", {})
     source = summary.get("source")
     if not source:
         raise ValueError("model file does not record its training data; pass --demos PATH")
-    demos = data.load_lasa(source[5:]) if source.startswith("lasa:") else data.load_demos(source)
+    demos = data.load_source(source)
     if summary.get("sha256") and demos.digest() != summary["sha256"]:
         raise ValueError(f"demos at {source} differ from those the model was trained on (sha256 mismatch); "
                          f"pass --demos PATH to evaluate on other data")

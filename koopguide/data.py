@@ -90,6 +90,12 @@ def load_lasa(name: str) -> Demonstrations:
     return Demonstrations(source=f"lasa:{name}", trajectories=trajectories)
 
 
+def load_source(source: str | Path) -> Demonstrations:
+    """Demonstrations by the source string a model file records: ``lasa:NAME`` or a path."""
+    text = str(source)
+    return load_lasa(text[len("lasa:"):]) if text.startswith("lasa:") else load_demos(text)
+
+
 # ---------------------------------------------------------------------------------- user files
 def load_demos(path: str | Path) -> Demonstrations:
     """Demonstrations from a ``.csv``/``.npy`` file or a folder of them (sorted by name).

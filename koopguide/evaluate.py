@@ -65,15 +65,11 @@ def dtw_distance(a: np.ndarray, b: np.ndarray) -> float:
 
 def reproduce(field: FlowField, demos: Demonstrations) -> list[np.ndarray]:
     """The field's reproduction of each demonstration: same start, same number of samples."""
-    out = []
     lengths = {t.shape[0] for t in demos.trajectories}
     if len(lengths) == 1:  # one batched rollout
         starts = np.stack([t[0] for t in demos.trajectories])
-        reps = field.rollout(starts, lengths.pop() - 1, substeps=field.substeps)
-        return list(reps)
-    for traj in demos.trajectories:
-        out.append(field.rollout(traj[0], traj.shape[0] - 1, substeps=field.substeps)[0])
-    return out
+        return list(field.rollout(starts, lengths.pop() - 1, substeps=field.substeps))
+    return [field.rollout(t[0], t.shape[0] - 1, substeps=field.substeps)[0] for t in demos.trajectories]
 
 
 def convergence_box(demos_bounds: tuple[np.ndarray, np.ndarray], enlarge: float) -> tuple[np.ndarray, np.ndarray]:
