@@ -19,9 +19,9 @@ Registrar = Callable[[argparse._SubParsersAction], None]
 
 def _registrars() -> list[Registrar]:
     # Imported lazily so `koopguide eval` never pays for torch, and `koopguide sitl` never for the learner.
-    from koopguide import commands_learn
+    from koopguide import commands_guide, commands_learn, commands_monitor
 
-    registrars: list[Registrar] = [commands_learn.register]
+    registrars: list[Registrar] = [commands_learn.register, commands_guide.register, commands_monitor.register]
     try:
         from sitl import cli as sitl_cli
     except ImportError as exc:  # the simulator package is part of this distribution

@@ -97,7 +97,8 @@ class Frame(enum.IntEnum):
     GLOBAL_TERRAIN_ALT_INT = 11
 
 
-NEAR_ZONE_RADII = 4.0  # loiter holds its heading within this many LOIT_RADIUS of the point
+PIVOT_ANGLE_RAD = math.radians(60.0)  # WP_PIVOT_ANGLE: turn in place beyond this heading error
+REVERSE_HYSTERESIS_RAD = math.radians(30.0)  # loiter flips forward/reverse only past 90 deg + this
 
 # POSITION_TARGET_TYPEMASK bits: a set bit means "ignore this field".
 POS_IGNORE = 0x7  # X, Y, Z
@@ -235,6 +236,7 @@ class ControllerState:
     desired_speed: float = 0.0  # [m/s]
     throttle: float = 0.0  # [-1, 1]
     steering: float = 0.0  # [-1, 1]
+    reversing: bool = False  # loiter is backing toward its point
 
 
 class Autopilot:
@@ -367,29 +369,36 @@ class Autopilot:
     ) -> tuple[float, float]:
         """ArduPilot Rover loiter: head for the point (forward or reverse) outside LOIT_RADIUS.
 
-        Within NEAR_ZONE_RADII x LOIT_RADIUS the heading is held and only the distance along it is
-        closed, so sensor noise on a short bearing does not saturate the steering.
+        Within LOIT_RADIUS the heading is held and the speed is zero. Outside it the boat turns toward
+        the point (pivoting while it faces away) at a speed growing with the distance, so in a current it
+        settles facing upstream a little outside the radius, where its speed balances the current.
         """
         p = self.params
         dn, de = point[0] - nav.n, point[1] - nav.e
         distance = math.hypot(dn, de)
         radius = p.get("LOIT_RADIUS")
         ctl = self.control
-        if distance <= NEAR_ZONE_RADII * radius:
-            # near the point the bearing is noise: keep the heading, close the along-heading distance
+        if distance <= radius:
             heading = ctl.desired_heading if ctl.desired_heading is not None else nav.psi
-            along = dn * math.cos(nav.psi) + de * math.sin(nav.psi)
-            speed = math.copysign(max(abs(along) - radius, 0.0) * p.get("LOIT_SPEED_GAIN"), along)
+            speed = 0.0
         else:
             speed = min((distance - radius) * p.get("LOIT_SPEED_GAIN"), speed_cap)
             heading = math.atan2(de, dn)
             error = wrap_pi(heading - nav.psi)
             loiter_type = round(p.get("LOIT_TYPE"))
-            if (abs(error) > math.pi / 2 and loiter_type == 0) or loiter_type == 2:
+            if loiter_type == 0:  # ArduPilot: reverse when the point is behind; hysteresis keeps it from chattering
+                flip = math.pi / 2 + REVERSE_HYSTERESIS_RAD  # the current direction is kept up to 120 deg off
+                reversing = abs(error) > flip if not ctl.reversing else abs(wrap_pi(error + math.pi)) <= flip
+                if reversing != ctl.reversing:
+                    ctl.speed_integral = 0.0  # the speed loop's integrator belongs to the old direction
+                    ctl.reversing = reversing
+            else:
+                ctl.reversing = loiter_type == 2
+            if ctl.reversing:
                 heading = wrap_pi(heading + math.pi)
                 error = wrap_pi(heading - nav.psi)
                 speed = -speed
-            speed *= 1.0 - min(abs(error) / (math.pi / 2), 1.0) * 0.5
+            speed *= max(math.cos(error), 0.0) if abs(error) <= PIVOT_ANGLE_RAD else 0.0  # skid steer pivots
         return self._steer_to_heading(heading, nav, dt), self._throttle(speed, nav, dt)
 
     def _steer_to_heading(self, heading: float, nav: Navigation, dt: float) -> float:

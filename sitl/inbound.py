@@ -15,6 +15,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from koopguide.geodesy import geodetic_to_ned
 from sitl.autopilot import (
     MODE_NUMBERS,
     Frame,
@@ -25,7 +26,6 @@ from sitl.autopilot import (
 )
 from sitl.boat import Boat
 from sitl.config import OriginConfig
-from sitl.geodesy import geodetic_to_ned
 from sitl.mavlink_endpoint import Link
 from sitl.telemetry import StreamSchedule, TelemetryWriter
 
@@ -138,7 +138,7 @@ def _run_command(channel: Channel, command: int, msg: Any) -> MavResult:
             lat, lon = (
                 (msg.x / 1e7, msg.y / 1e7) if msg.get_type() == "COMMAND_INT" else (msg.param5, msg.param6)
             )
-            ap.set_home(*geodetic_to_ned(lat, lon, channel.origin))
+            ap.set_home(*geodetic_to_ned(lat, lon, channel.origin.latitude_deg, channel.origin.longitude_deg))
         return MavResult.ACCEPTED
     return MavResult.UNSUPPORTED
 
@@ -167,7 +167,8 @@ def _position_target_global(channel: Channel, msg: Any) -> None:
             channel, f"SET_POSITION_TARGET_GLOBAL_INT frame {msg.coordinate_frame} not supported, ignored"
         )
         return
-    n, e = geodetic_to_ned(msg.lat_int / 1e7, msg.lon_int / 1e7, channel.origin)
+    origin = channel.origin
+    n, e = geodetic_to_ned(msg.lat_int / 1e7, msg.lon_int / 1e7, origin.latitude_deg, origin.longitude_deg)
     _apply_setpoint(channel, msg, Frame.LOCAL_NED, (n, e))
 
 

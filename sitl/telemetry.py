@@ -14,9 +14,9 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from koopguide.geodesy import ned_to_geodetic
 from sitl.autopilot import AUTOPILOT_MODES, MANUAL_INPUT_MODES
 from sitl.config import OriginConfig, StreamRates
-from sitl.geodesy import ned_to_geodetic
 
 if TYPE_CHECKING:
     from sitl.boat import Boat
@@ -160,7 +160,7 @@ class TelemetryWriter:
 
     def gps_raw_int(self) -> None:
         n, e, vn, ve = self._fix()
-        lat, lon = ned_to_geodetic(n, e, self.origin)
+        lat, lon = ned_to_geodetic(n, e, self.origin.latitude_deg, self.origin.longitude_deg)
         speed = math.hypot(vn, ve)
         cog = heading_cdeg(math.atan2(ve, vn)) if speed > 0.02 else 65535
         fix_type = mavlink.GPS_FIX_TYPE_3D_FIX if self._healthy() else mavlink.GPS_FIX_TYPE_NO_FIX
@@ -181,7 +181,7 @@ class TelemetryWriter:
         if self.boat.sensors.fix is None:
             return  # no position estimate yet: ArduPilot sends no position either
         n, e, vn, ve = self._fix()
-        lat, lon = ned_to_geodetic(n, e, self.origin)
+        lat, lon = ned_to_geodetic(n, e, self.origin.latitude_deg, self.origin.longitude_deg)
         self.mav.global_position_int_send(
             time_boot_ms(self.boat.t),
             round(lat * 1e7),
@@ -230,7 +230,7 @@ class TelemetryWriter:
 
     def home_position(self) -> None:
         n, e = self.boat.autopilot.home
-        lat, lon = ned_to_geodetic(n, e, self.origin)
+        lat, lon = ned_to_geodetic(n, e, self.origin.latitude_deg, self.origin.longitude_deg)
         self.mav.home_position_send(
             round(lat * 1e7),
             round(lon * 1e7),

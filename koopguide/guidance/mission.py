@@ -1,0 +1,146 @@
+"""A whole simulated mission: the bundled simulator and the guidance service, meeting over loopback MAVLink.
+
+Used by ``koopguide demo`` and by the end-to-end tests. The simulator runs on its own thread
+(:class:`sitl.runner.SimulationThread`) and sends to the service's listening UDP port; the service runs
+on the caller's event loop, exactly as ``koopguide run`` does. Ground truth comes from the simulator's
+recorder. Conventions: local NED metres, simulated (vehicle) seconds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import socket
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from koopguide.field import FlowField
+from koopguide.guidance.frames import ModelFrame
+from koopguide.guidance.settings import GuidanceConfig
+
+TANK_M = (4.5, 3.0)  # the paper's tank, N x E [m]
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def model_frame(field_: FlowField, cfg: GuidanceConfig) -> ModelFrame:
+    return ModelFrame(goal_model=tuple(field_.goal), goal_ned=cfg.frame.goal_ned, scale=cfg.frame.scale,
+                      heading_deg=cfg.frame.heading_deg)
+
+
+def demo_start_pose(field_: FlowField, frame: ModelFrame, start: np.ndarray) -> tuple[float, float, float]:
+    """(N, E, heading_deg) at a model point, heading along the field there."""
+    n, e = frame.to_ned(start)
+    vn, ve = frame.direction_to_ned(field_.velocity(start))
+    return float(n), float(e), math.degrees(math.atan2(ve, vn))
+
+
+def tank_around(points_ned: np.ndarray, margin_m: float = 0.6) -> dict[str, list[float]]:
+    """A world box (the paper's tank size when it fits) containing ``points_ned`` with a margin."""
+    lo, hi = points_ned.min(axis=0) - margin_m, points_ned.max(axis=0) + margin_m
+    size = np.maximum(hi - lo, TANK_M)
+    mid = 0.5 * (lo + hi)
+    return {"north_m": [float(mid[0] - size[0] / 2), float(mid[0] + size[0] / 2)],
+            "east_m": [float(mid[1] - size[1] / 2), float(mid[1] + size[1] / 2)]}
+
+
+def sim_overrides(pose: tuple[float, float, float], port: int, world: dict[str, list[float]], speedup: float,
+                  flow: dict[str, Any] | None = None, seed: int = 0) -> dict[str, Any]:
+    """The simulator config for one boat at ``pose`` sending MAVLink to the service on ``port``."""
+    return {"seed": seed, "speedup": speedup, "start_poses": [list(pose)], "world": {"walls": True, **world},
+            "mavlink": {"endpoints": [f"udpout:127.0.0.1:{port}"]},
+            "flow": flow or {"kinds": ["none"]}, "recorder": {"rate_hz": 10.0}}
+
+
+@dataclass
+class MissionResult:
+    arrived: bool
+    arrival_time_s: float | None  # simulated time from the service's first setpoint to arrival
+    track: np.ndarray  # (T, 3): t, N, E of the true boat [s, m, m]
+    transitions: list[tuple[float, str]]
+    max_setpoint_mps: float
+    final_distance_m: float
+    max_distance_after_arrival_m: float | None
+    statuses: list[dict[str, Any]] = field(default_factory=list)
+
+
+async def fly(cfg: GuidanceConfig, model: Path, sim_cfg: Any, timeout_s: float, settle_s: float = 20.0,
+              zenoh_config: Any | None = None, progress: bool = False) -> MissionResult:
+    """Run one mission: until arrival plus ``settle_s`` simulated seconds, or ``timeout_s`` after start."""
+    from koopguide.guidance.daemon import GuidanceDaemon
+    from sitl.runner import SimulationThread
+
+    records: list[dict[str, Any]] = []
+    daemon = await GuidanceDaemon.create(cfg, model, zenoh_config)
+    runner = asyncio.create_task(daemon.run())
+    statuses: list[dict[str, Any]] = []
+    try:
+        with SimulationThread(sim_cfg, records):
+            t_start = t_arrived = None
+            last_print = -math.inf
+            wall_guard = time.monotonic() + 10.0 + 3.0 * (timeout_s + settle_s) / max(sim_cfg.speedup, 0.5)
+            while time.monotonic() < wall_guard and not runner.done():
+                await asyncio.sleep(0.02)
+                t = daemon.clock.now()
+                if t_start is None and daemon.setpoints_sent > 0:
+                    t_start = t
+                if t_arrived is None and daemon.arrived:
+                    t_arrived = t
+                if progress and t - last_print >= 5.0 and daemon.clock.started:
+                    last_print = t
+                    statuses.append(daemon.status())
+                    print_progress(statuses[-1])
+                if t_start is not None and t_arrived is None and t - t_start > timeout_s:
+                    break
+                if t_arrived is not None and t - t_arrived >= settle_s:
+                    break
+            daemon.stop()
+            await runner
+    finally:
+        if not runner.done():
+            daemon.stop()
+            await runner
+    result = summarize(daemon, records, t_start, t_arrived, statuses)
+    result.records = records
+    return result
+
+
+def summarize(daemon: Any, records: list[dict[str, Any]], t_start: float | None, t_arrived: float | None,
+              statuses: list[dict[str, Any]]) -> MissionResult:
+    states = [r for r in records if r.get("kind") == "state"]
+    track = np.array([[r["t"], r["n"], r["e"]] for r in states]) if states else np.zeros((0, 3))
+    goal = daemon.law.goal_ned
+    dist = np.hypot(track[:, 1] - goal[0], track[:, 2] - goal[1]) if len(track) else np.array([math.inf])
+    after = None
+    if t_arrived is not None and len(track):
+        mask = track[:, 0] >= t_arrived
+        after = float(dist[mask].max()) if mask.any() else None
+    return MissionResult(
+        arrived=t_arrived is not None,
+        arrival_time_s=None if t_arrived is None or t_start is None else t_arrived - t_start,
+        track=track, transitions=list(daemon.transitions), max_setpoint_mps=daemon.max_cmd_speed,
+        final_distance_m=float(dist[-1]), max_distance_after_arrival_m=after, statuses=statuses,
+    )
+
+
+def print_progress(status: dict[str, Any]) -> None:
+    pos = status["position_ned"]
+    where = f"N {pos[0]:+.2f} E {pos[1]:+.2f} m" if pos else "no position yet"
+    dist = status["distance_to_goal_m"]
+    speed = math.hypot(*status["cmd_velocity_ned"])
+    print(f"  t {status['vehicle_time_s']:6.1f} s  {status['state']:8s} {status['mode'] or '-':7s} {where}  "
+          f"to goal {dist if dist is not None else float('nan'):.2f} m  cmd {speed:.2f} m/s", file=sys.stderr)
+
+
+def run_demo(args: Any) -> int:
+    """``koopguide demo``: see the README quickstart."""
+    raise NotImplementedError

@@ -1,0 +1,198 @@
+"""The guidance service's typed configuration: frozen dataclasses built from ``config/guidance.yaml``.
+
+Defaults live only in ``config/guidance.yaml``; these classes carry the types, the units (in the field
+names) and the range checks. :func:`load` merges defaults, the user's file and command-line overrides
+and raises :class:`koopguide.config.ConfigError` naming the key for anything unknown, ill-typed or out
+of range - before the service opens any link.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from koopguide import config
+from koopguide.config import ConfigError
+
+VEHICLE_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")  # a zenoh key segment: no / * $ # ?
+MAX_RATE_HZ = 50.0
+
+
+class ArrivalAction(enum.Enum):
+    LOITER = "loiter"  # the autopilot's LOITER holds position against a current
+    HOLD = "hold"  # the autopilot's HOLD: motors stop (a boat drifts)
+    STATION_KEEP = "station_keep"  # keep sending velocities toward the goal
+
+
+class OutsideDomain(enum.Enum):
+    HOLD = "hold"
+    CLAMP = "clamp"
+
+
+class ExitMode(enum.Enum):
+    LOITER = "loiter"
+    HOLD = "hold"
+
+
+@dataclass(frozen=True)
+class MavlinkSettings:
+    endpoint: str
+    target_system: int
+    target_component: int
+    source_system: int
+    source_component: int
+    heartbeat_hz: float
+    position_rate_hz: float
+    link_timeout_s: float
+    reconnect_min_s: float
+    reconnect_max_s: float
+    command_retry_s: float
+
+    def __post_init__(self) -> None:
+        for name in ("target_system", "source_system"):
+            _check(1 <= getattr(self, name) <= 255, f"mavlink.{name}", getattr(self, name), "1 .. 255")
+        for name in ("target_component", "source_component"):
+            _check(0 <= getattr(self, name) <= 255, f"mavlink.{name}", getattr(self, name), "0 .. 255")
+        for name in ("heartbeat_hz", "position_rate_hz", "link_timeout_s", "reconnect_min_s", "command_retry_s"):
+            _positive(self, "mavlink", name)
+        _check(self.reconnect_max_s >= self.reconnect_min_s, "mavlink.reconnect_max_s", self.reconnect_max_s,
+               f">= reconnect_min_s ({self.reconnect_min_s})")
+
+
+@dataclass(frozen=True)
+class FrameSettings:
+    goal_ned: tuple[float, float]  # [m]
+    goal_latlon: tuple[float, float] | None  # [deg]
+    scale: float  # metres per model unit
+    heading_deg: float  # compass heading of model +x
+
+    def __post_init__(self) -> None:
+        _finite(self, "frame", "goal_ned", "scale", "heading_deg")
+        _positive(self, "frame", "scale")
+        if self.goal_latlon is not None:
+            lat, lon = self.goal_latlon
+            _check(-90 <= lat <= 90 and -180 <= lon <= 180, "frame.goal_latlon", self.goal_latlon,
+                   "latitude -90 .. 90 and longitude -180 .. 180 degrees")
+
+
+@dataclass(frozen=True)
+class CommandSettings:
+    rate_hz: float
+    max_speed_mps: float
+    min_speed_mps: float
+    turn_slowdown: bool
+    lookahead_m: float
+    with_yaw: bool
+    lead_s: float
+    domain_margin: float
+    speed_grid: int
+
+    def __post_init__(self) -> None:
+        _finite(self, "command", "rate_hz", "max_speed_mps", "min_speed_mps", "lead_s", "domain_margin", "lookahead_m")
+        _check(0 < self.rate_hz <= MAX_RATE_HZ, "command.rate_hz", self.rate_hz, f"0 < rate <= {MAX_RATE_HZ:g}")
+        _positive(self, "command", "max_speed_mps")
+        _check(0 <= self.min_speed_mps <= self.max_speed_mps, "command.min_speed_mps", self.min_speed_mps,
+               f"0 .. max_speed_mps ({self.max_speed_mps})")
+        for name in ("lead_s", "domain_margin", "lookahead_m"):
+            _check(getattr(self, name) >= 0, f"command.{name}", getattr(self, name), ">= 0")
+        _check(self.speed_grid >= 8, "command.speed_grid", self.speed_grid, ">= 8")
+
+
+@dataclass(frozen=True)
+class ArrivalSettings:
+    radius_m: float
+    on_arrival: ArrivalAction
+    station_gain: float
+
+    def __post_init__(self) -> None:
+        _positive(self, "arrival", "radius_m", "station_gain")
+
+
+@dataclass(frozen=True)
+class EstimatorSettings:
+    position_std_m: float
+    velocity_std_mps: float
+    accel_std_mps2: float
+    gate_chi2: float
+    reset_after_rejections: int
+    max_dt_s: float
+
+    def __post_init__(self) -> None:
+        _positive(self, "estimator", "position_std_m", "velocity_std_mps", "accel_std_mps2", "gate_chi2", "max_dt_s")
+        _check(self.reset_after_rejections >= 1, "estimator.reset_after_rejections", self.reset_after_rejections,
+               ">= 1")
+
+
+@dataclass(frozen=True)
+class FailsafeSettings:
+    stale_after_s: float
+    outside_domain: OutsideDomain
+    geofence_ned: tuple[tuple[float, float], tuple[float, float]] | None  # ((N_min, N_max), (E_min, E_max)) [m]
+    on_exit: ExitMode
+
+    def __post_init__(self) -> None:
+        _positive(self, "failsafe", "stale_after_s")
+        if self.geofence_ned is not None:
+            for axis, (lo, hi) in zip("NE", self.geofence_ned, strict=True):
+                _check(math.isfinite(lo) and math.isfinite(hi) and lo < hi, "failsafe.geofence_ned", self.geofence_ned,
+                       f"finite [min, max] with min < max on {axis}")
+
+
+@dataclass(frozen=True)
+class StatusSettings:
+    rate_hz: float
+    field_grid: int
+
+    def __post_init__(self) -> None:
+        _check(0 < self.rate_hz <= MAX_RATE_HZ, "status.rate_hz", self.rate_hz, f"0 < rate <= {MAX_RATE_HZ:g}")
+        _check(2 <= self.field_grid <= 200, "status.field_grid", self.field_grid, "2 .. 200")
+
+
+@dataclass(frozen=True)
+class GuidanceConfig:
+    vehicle_id: str
+    arm: bool
+    mavlink: MavlinkSettings
+    frame: FrameSettings
+    command: CommandSettings
+    arrival: ArrivalSettings
+    estimator: EstimatorSettings
+    failsafe: FailsafeSettings
+    status: StatusSettings
+
+    def __post_init__(self) -> None:
+        _check(bool(VEHICLE_ID.match(self.vehicle_id)), "vehicle_id", self.vehicle_id,
+               "1-64 characters of A-Z a-z 0-9 _ -")
+
+
+def load(user_file: str | Path | None = None, overrides: dict[str, Any] | None = None) -> GuidanceConfig:
+    """Defaults, then ``user_file``, then ``overrides`` (nested like the YAML), checked."""
+    try:
+        return config.build(GuidanceConfig, config.load_layers("guidance", user_file, overrides or {}))
+    except (TypeError, ValueError) as exc:  # a range check raised while building
+        if isinstance(exc, ConfigError):
+            raise
+        raise ConfigError(str(exc)) from None
+
+
+def _check(ok: bool, key: str, value: Any, expected: str) -> None:
+    if not ok:
+        raise ConfigError(f"{key}: {value!r} is out of range (expected {expected})")
+
+
+def _positive(obj: Any, section: str, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        _check(math.isfinite(value) and value > 0, f"{section}.{name}", value, "a finite number > 0")
+
+
+def _finite(obj: Any, section: str, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        values = value if isinstance(value, tuple) else (value,)
+        _check(all(math.isfinite(v) for v in values), f"{section}.{name}", value, "finite numbers")
+

@@ -1,0 +1,249 @@
+"""``koopguide monitor``, its table and the example subscriber, against real StatusBus publishers.
+
+Publishers run in this process (a StatusBus on its own event-loop thread); the monitor and the
+example run as subprocesses with a ``--zenoh-config`` file: the shipped default moved to a free port.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from koopguide.guidance.status import encode_status
+from koopguide.guidance.status_bus import StatusBus
+from koopguide.guidance.zenoh_config import DEFAULT_ZENOH_CONFIG_FILE, WELL_KNOWN_PORT, default_zenoh_config
+from koopguide.monitor import Monitor, MonitorState, VehicleView, render_table
+from tests.guidance.test_status_bus import config_snapshot, field_sampler, free_port, sample_status, wait_for
+
+REPO = Path(__file__).resolve().parents[2]
+MONITOR = [sys.executable, "-m", "koopguide", "monitor"]
+
+
+# ---------------------------------------------------------------------------------- helpers
+@contextmanager
+def publishing(vehicle_id: str, port: int, state: str = "guiding", period: float = 0.05) -> Iterator[None]:
+    """A StatusBus publishing ``state`` every ``period`` s on a thread of its own, until the block ends."""
+    stop = threading.Event()
+    ready = threading.Event()
+    errors: list[BaseException] = []
+
+    async def run() -> None:
+        bus = await StatusBus.create(vehicle_id, default_zenoh_config(port), field_sampler, config_snapshot)
+        try:
+            assert bus.enabled
+            ready.set()
+            seq = 0
+            while not stop.is_set():
+                bus.publish(sample_status(vehicle_id, seq=seq, state=state))
+                seq += 1
+                await asyncio.sleep(period)
+        finally:
+            await bus.close()
+
+    def thread_main() -> None:
+        try:
+            asyncio.run(run())
+        except BaseException as exc:  # reported by the test thread below
+            errors.append(exc)
+            ready.set()
+
+    thread = threading.Thread(target=thread_main, name=f"publisher {vehicle_id}")
+    thread.start()
+    try:
+        assert ready.wait(10), "publisher did not start"
+        assert not errors, errors
+        yield
+    finally:
+        stop.set()
+        thread.join(10)
+    assert not errors, errors
+
+
+def config_file(tmp_path: Path, port: int) -> Path:
+    """The shipped default configuration file, rendezvous moved to ``port``."""
+    text = DEFAULT_ZENOH_CONFIG_FILE.read_text()
+    assert f":{WELL_KNOWN_PORT}" in text
+    path = tmp_path / "zenoh.json5"
+    path.write_text(text.replace(f":{WELL_KNOWN_PORT}", f":{port}"))
+    return path
+
+
+def run(cmd: list[str], timeout: float = 20.0) -> subprocess.CompletedProcess:
+    return subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=timeout)
+
+
+def full_view(vehicle_id: str, now: float, **changes) -> VehicleView:
+    return VehicleView(vehicle_id, status=sample_status(vehicle_id, **changes), received_at=now - 0.25,
+                       statuses=3, alive=True)
+
+
+# ------------------------------------------------------------------------------ pure table
+def test_render_table_shows_every_column():
+    now = 1_700_000_100.0
+    vehicles = {
+        "boat1": full_view("boat1", now),
+        "boat-2": VehicleView("boat-2", status=sample_status(
+            "boat-2", state="waiting", mode=None, armed=None, position_ned=None, distance_to_goal_m=None,
+            position_age_s=None, cmd_velocity_ned=[0.0, 0.0], loop_latency_ms={"p50": None, "p99": None},
+        ), received_at=now - 4.0, alive=False),
+        "ghost": VehicleView("ghost", alive=True),
+    }
+    table = render_table(vehicles, now)
+    lines = table.splitlines()
+    assert "vehicles 3 (alive 2)" in lines[0]
+    header, rows = lines[1], lines[2:]
+    for column in ("VEHICLE", "LIVE", "STATE", "MODE", "ARMED", "N[m]", "E[m]", "TO GOAL[m]", "CMD[m/s]",
+                   "POS AGE[s]", "MSG AGE[s]", "LOOP p50/p99[ms]", "BAD"):
+        assert column in header
+    assert [r.split()[0] for r in rows] == ["boat-2", "boat1", "ghost"]  # sorted by id
+    boat1 = rows[1].split()
+    assert boat1 == ["boat1", "alive", "guiding", "GUIDED", "yes", "12.5", "-3.2", "12.9", "0.90", "0.04", "0.2",
+                     "0.8/2.5", "0"]
+    assert rows[0].split()[:5] == ["boat-2", "gone", "waiting", "-", "-"]
+    assert rows[0].split()[-3:] == ["4.0", "-/-", "0"]
+    assert rows[2].split()[:3] == ["ghost", "alive", "-"]
+
+
+def test_render_table_without_vehicles_says_it_waits():
+    assert "no vehicles yet" in render_table({}, time.time())
+
+
+def test_malformed_payloads_are_counted_never_raised():
+    state = MonitorState()
+    now = time.time()
+    state.on_status("koopguide/boat1/status", b"{broken", now)
+    state.on_status("koopguide/boat1/status", encode_status(sample_status("boat1", seq=1)), now)
+    state.on_status("koopguide/boat1/status", encode_status(sample_status("other")), now)  # wrong key
+    state.on_status("koopguide/boat1/status", b'{"t": NaN}', now)
+    assert state.malformed == 3 and state.vehicles["boat1"].malformed == 3
+    assert state.vehicles["boat1"].status["seq"] == 1  # the good one is kept
+    table = render_table(state.vehicles, now, malformed=state.malformed, last_error=state.last_error)
+    assert "malformed statuses 3" in table and "last malformed: boat1:" in table
+    assert table.splitlines()[-1].split()[-1] == "3"
+
+
+def test_ready_once_every_alive_vehicle_reported():
+    state = MonitorState()
+    assert not state.all_alive_reported()
+    state.on_liveliness("koopguide/a/alive", True)
+    state.on_liveliness("koopguide/b/alive", True)
+    state.on_status("koopguide/a/status", encode_status(sample_status("a")), time.time())
+    assert not state.all_alive_reported()
+    state.on_liveliness("koopguide/b/alive", False)  # gone: not waited for
+    assert state.all_alive_reported()
+
+
+# ------------------------------------------------------------------------ in-process session
+@pytest.mark.timeout(30)
+def test_monitor_sees_status_liveliness_and_garbage(tmp_path: Path):
+    port = free_port()
+    with Monitor.open(default_zenoh_config(port)) as monitor:
+        with publishing("boat1", port):
+            wait_for(lambda: monitor.poll() >= 0 and monitor.state.all_alive_reported())
+            view = monitor.state.vehicles["boat1"]
+            assert view.alive and view.status["state"] == "guiding"
+            rogue = zenoh.open(default_zenoh_config(port))
+            try:
+                wait_for(lambda: rogue.put("koopguide/rogue/status", b"not a status") or (
+                    monitor.poll() >= 0 and monitor.state.malformed > 0))
+            finally:
+                rogue.close()
+        wait_for(lambda: monitor.poll() >= 0 and monitor.state.vehicles["boat1"].alive is False)
+        table = monitor.table()
+    assert "boat1" in table and "gone" in table and "malformed statuses" in table
+
+
+# ------------------------------------------------------------------------------ subprocesses
+@pytest.mark.timeout(30)
+def test_monitor_once_prints_every_alive_vehicle(tmp_path: Path):
+    port = free_port()
+    cfg = config_file(tmp_path, port)
+    with publishing("boat1", port, state="guiding"), publishing("boat-2", port, state="arrived"):
+        started = time.monotonic()
+        result = run([*MONITOR, "--zenoh-config", str(cfg), "--once"])
+        elapsed = time.monotonic() - started
+    assert result.returncode == 0, result.stderr
+    rows = {line.split()[0]: line.split() for line in result.stdout.splitlines()[2:]}
+    assert rows["boat1"][:3] == ["boat1", "alive", "guiding"]
+    assert rows["boat-2"][:3] == ["boat-2", "alive", "arrived"]
+    assert "\x1b[" not in result.stdout  # not a terminal: no ANSI
+    assert elapsed < 4.5, f"--once took {elapsed:.1f} s with both vehicles publishing"
+
+
+@pytest.mark.timeout(30)
+def test_monitor_once_without_vehicles_exits_1(tmp_path: Path):
+    result = run([*MONITOR, "--zenoh-config", str(config_file(tmp_path, free_port())), "--once"])
+    assert result.returncode == 1
+    assert "no vehicle status received" in result.stderr
+    assert result.stdout == ""
+
+
+@pytest.mark.timeout(30)
+def test_monitor_duration_prints_plain_blocks_and_exits_0(tmp_path: Path):
+    port = free_port()
+    with publishing("boat1", port):
+        started = time.monotonic()
+        result = run([*MONITOR, "--zenoh-config", str(config_file(tmp_path, port)), "--duration", "1.2"])
+        elapsed = time.monotonic() - started
+    assert result.returncode == 0, result.stderr
+    blocks = [b for b in result.stdout.split("\n\n") if b.strip()]
+    assert len(blocks) >= 2  # about two per second
+    assert "boat1" in blocks[-1] and "guiding" in blocks[-1]
+    assert "\x1b[" not in result.stdout
+    assert elapsed < 6.0
+
+
+@pytest.mark.timeout(30)
+def test_monitor_ctrl_c_exits_0(tmp_path: Path):
+    port = free_port()
+    with publishing("boat1", port):
+        proc = subprocess.Popen([*MONITOR, "--zenoh-config", str(config_file(tmp_path, port))], cwd=REPO,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            first_line = proc.stdout.readline()  # the first table has started
+            assert first_line.startswith("koopguide monitor"), first_line + proc.stderr.read()
+            time.sleep(0.3)
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=10)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["--duration", "0"], "--duration must be a positive number of seconds, got 0"),
+        (["--zenoh-config", "/nonexistent/zenoh.json5", "--once"], "/nonexistent/zenoh.json5: zenoh configuration"),
+    ],
+)
+def test_monitor_user_errors_are_one_line(args, expected):
+    result = run([*MONITOR, *args])
+    assert result.returncode == 2
+    assert expected in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.timeout(30)
+def test_example_subscriber_prints_states_and_positions(tmp_path: Path):
+    port = free_port()
+    with publishing("boat1", port):
+        result = run([sys.executable, "examples/zenoh_subscriber.py", "--duration", "1.0",
+                      "--zenoh-config", str(config_file(tmp_path, port))])
+    assert result.returncode == 0, result.stderr
+    first = result.stdout.splitlines()[0].split()
+    assert first == ["boat1", "guiding", "N", "12.50", "m", "E", "-3.25", "m"]
+
