@@ -21,6 +21,7 @@ test: setup
 
 bench: setup
 	$(VENV)/bin/koopguide bench speed
+	$(VENV)/bin/koopguide bench guidance
 
 clean:
 	rm -rf $(OUT) .pytest_cache

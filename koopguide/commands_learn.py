@@ -42,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=cmd_plot)
 
     p = sub.add_parser("bench", help="benchmarks that print figures (never timed tests)")
-    p.add_argument("what", choices=["speed", "sitl"], help="speed: training and query speed; sitl: simulator")
+    p.add_argument("what", choices=["speed", "sitl", "guidance"],
+                   help="speed: training and query speed; sitl: simulator; guidance: service latency and CPU")
     p.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the benchmark")
     p.set_defaults(run=cmd_bench)
 
@@ -164,6 +165,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from sitl import bench as sitl_bench
 
         return sitl_bench.main(args.rest)
+    if args.what == "guidance":
+        from koopguide.guidance import bench as guidance_bench
+
+        return guidance_bench.main(args.rest)
     from koopguide.bench import main as bench_main
 
     return bench_main(args.rest)

@@ -71,6 +71,7 @@ class MissionResult:
     final_distance_m: float
     max_distance_after_arrival_m: float | None
     statuses: list[dict[str, Any]] = field(default_factory=list)
+    records: list[dict[str, Any]] = field(default_factory=list)  # the simulator's ground-truth records
 
 
 async def fly(cfg: GuidanceConfig, model: Path, sim_cfg: Any, timeout_s: float, settle_s: float = 20.0,
@@ -141,6 +142,75 @@ def print_progress(status: dict[str, Any]) -> None:
           f"to goal {dist if dist is not None else float('nan'):.2f} m  cmd {speed:.2f} m/s", file=sys.stderr)
 
 
+def demo_mission(model: Path, start_index: int, current_mps: float, speedup: float, vehicle_id: str = "demo",
+                 seed: int = 0) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
+    """The README's mission: a Zshape demo start, goal at NED (0, 0), 0.04 m per unit, model +x East,
+    0.3 m/s top speed, in a uniform current toward the north (across the field's final leg)."""
+    from koopguide import data
+    from koopguide.field import load_field
+    from koopguide.guidance import settings
+    from sitl import config as sitl_config
+
+    port = free_udp_port()
+    cfg = settings.load(overrides={
+        "vehicle_id": vehicle_id, "arm": True, "mavlink": {"endpoint": f"udp:127.0.0.1:{port}"},
+        "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0}, "command": {"max_speed_mps": 0.3},
+    })
+    field_ = load_field(model)
+    frame = model_frame(field_, cfg)
+    starts = data.load_lasa("Zshape").trajectories
+    if not 0 <= start_index < len(starts):
+        raise ValueError(f"--start must be 0 .. {len(starts) - 1}, got {start_index}")
+    pose = demo_start_pose(field_, frame, starts[start_index][0])
+    lo, hi = field_.bounds
+    corners = frame.to_ned(np.array([lo, hi, [lo[0], hi[1]], [hi[0], lo[1]]]))
+    world = tank_around(np.vstack([corners, [pose[:2]]]))
+    flow = {"kinds": ["uniform"], "uniform": {"speed_mps": current_mps, "direction_deg": 0.0}} if current_mps else None
+    sim_cfg = sitl_config.load(overrides=sim_overrides(pose, port, world, speedup, flow, seed))
+    return cfg, sim_cfg, pose
+
+
 def run_demo(args: Any) -> int:
-    """``koopguide demo``: see the README quickstart."""
-    raise NotImplementedError
+    """``koopguide demo``: train Zshape if no cached model, fly the mission in the simulator, plot it."""
+    import logging
+
+    from koopguide import cli
+    from koopguide.guidance.mission_plot import plot_mission
+    from koopguide.guidance.zenoh_config import load_zenoh_config
+    from sitl.flow import Flow
+
+    if args.speedup <= 0:
+        raise ValueError(f"--speedup must be > 0, got {args.speedup}")
+    zenoh_config = load_zenoh_config(args.zenoh_config)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    args.out.mkdir(parents=True, exist_ok=True)
+    model = args.out / "zshape.pt"
+    if not model.is_file():
+        print(f"koopguide demo: no cached model; training Zshape into {model}", file=sys.stderr)
+        code = cli.main(["train", "--lasa", "Zshape", "-o", str(model), "--seed", "0", "--quiet"])
+        if code:
+            return code
+    cfg, sim_cfg, pose = demo_mission(model, args.start, args.current_mps, args.speedup)
+    print(f"koopguide demo: boat at N {pose[0]:.2f} E {pose[1]:.2f} m heading {pose[2]:.0f} deg, goal N 0 E 0, "
+          f"current {args.current_mps:.2f} m/s toward north, simulator x{args.speedup:g}; "
+          f"status on zenoh koopguide/{cfg.vehicle_id}/status (watch: koopguide monitor)", file=sys.stderr)
+    result = asyncio.run(fly(cfg, model, sim_cfg, args.timeout_s, settle_s=20.0, zenoh_config=zenoh_config,
+                             progress=True))
+    from koopguide.field import load_field
+    from koopguide.guidance.command import GuidanceLaw
+
+    field_ = load_field(model)
+    law = GuidanceLaw(field_, model_frame(field_, cfg), cfg.command, cfg.arrival, cfg.failsafe)
+    world = sim_cfg.world
+    box = np.array([[world.north_m[0], world.east_m[0]], [world.north_m[1], world.east_m[1]]])
+    flow = Flow(sim_cfg.flow, np.random.default_rng(0))
+    png = args.out / "demo.png"
+    verdict = (f"arrived in {result.arrival_time_s:.1f} s" if result.arrived
+               else f"did not arrive within {args.timeout_s:g} s")
+    plot_mission(png, law.field_velocity_ned, box, result.track, pose[:2], cfg.frame.goal_ned, cfg.arrival.radius_m,
+                 lambda n, e: flow.velocity(n, e, 0.0), f"koopguide demo: Zshape, {verdict}")
+    after = result.max_distance_after_arrival_m
+    print(f"koopguide demo: {verdict}; largest setpoint {result.max_setpoint_mps:.3f} m/s"
+          + (f"; within {after:.2f} m of the goal for {20:.0f} s after arrival" if after is not None else "")
+          + f"; wrote {png}", file=sys.stderr)
+    return 0 if result.arrived else 1
