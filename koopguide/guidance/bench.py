@@ -252,8 +252,10 @@ def rate_list(text: str) -> list[float]:
         rates = [float(part) for part in text.split(",") if part.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected comma-separated rates in Hz, got {text!r}") from None
-    if not rates:
-        raise argparse.ArgumentTypeError("no rates given")
+    from koopguide.guidance.settings import MAX_RATE_HZ
+
+    if not rates or not all(0 < rate <= MAX_RATE_HZ for rate in rates):
+        raise argparse.ArgumentTypeError(f"expected rates in 0 < rate <= {MAX_RATE_HZ:g} Hz, got {text!r}")
     return rates
 
 
@@ -271,12 +273,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with tempfile.TemporaryDirectory(prefix="koopguide-bench-") as workdir:
             model = trained_model(args.model, Path(workdir))
+            model_label = str(model) if model.parent != Path(workdir) else "Zshape trained for this run (deleted)"
             figures = asyncio.run(measure(model, args.rates, args.seconds))
     except BenchError as exc:
         print(f"koopguide bench guidance: error: {exc}", file=sys.stderr)
         return 1
     machine = {"cpu_count": os.cpu_count(), "python": platform.python_version(),
-               "platform": platform.platform(terse=True), "model": str(model), "seconds": args.seconds}
+               "platform": platform.platform(terse=True), "model": model_label, "seconds": args.seconds}
     target = verdict(figures)
     if args.json:
         print(json.dumps({**machine, "rates": [asdict(f) for f in figures], "target": target}, indent=2))
