@@ -40,6 +40,9 @@ from typing import Any
 
 import numpy as np
 
+from koopguide.guidance import settings
+from koopguide.guidance.settings import GuidanceConfig
+
 TARGET_RATE_HZ = 50.0
 TARGET_P99_MS = 2.0
 DEFAULT_RATES_HZ = (10.0, 50.0)
@@ -98,14 +101,13 @@ def trained_model(model: Path | None, workdir: Path) -> Path:
 class Scenario:
     """One rate's guidance config and simulator overrides, meeting on a fresh loopback port."""
 
-    cfg: Any  # GuidanceConfig
+    cfg: GuidanceConfig
     sim_overrides: dict[str, Any]
 
 
 def scenario(model: Path, rate_hz: float, seconds: float) -> Scenario:
     from koopguide import data
     from koopguide.field import load_field
-    from koopguide.guidance import settings
     from koopguide.guidance.mission import demo_start_pose, free_udp_port, model_frame, sim_overrides, tank_around
 
     field = load_field(model)
@@ -252,10 +254,8 @@ def rate_list(text: str) -> list[float]:
         rates = [float(part) for part in text.split(",") if part.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected comma-separated rates in Hz, got {text!r}") from None
-    from koopguide.guidance.settings import MAX_RATE_HZ
-
-    if not rates or not all(0 < rate <= MAX_RATE_HZ for rate in rates):
-        raise argparse.ArgumentTypeError(f"expected rates in 0 < rate <= {MAX_RATE_HZ:g} Hz, got {text!r}")
+    if not rates or not all(0 < rate <= settings.MAX_RATE_HZ for rate in rates):
+        raise argparse.ArgumentTypeError(f"expected rates in 0 < rate <= {settings.MAX_RATE_HZ:g} Hz, got {text!r}")
     return rates
 
 

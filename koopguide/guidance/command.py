@@ -37,7 +37,7 @@ class GuidanceState(enum.Enum):
 
 
 ZERO = np.zeros(2)
-PURSUIT_STEPS = 8  # streamline steps per look-ahead
+PURSUIT_STEPS = 4  # streamline steps per look-ahead (field evaluations per setpoint)
 
 
 @dataclass(frozen=True)
@@ -109,50 +109,50 @@ class GuidanceLaw:
         if arrived or distance <= self.arrival.radius_m:
             v = self.arrival.station_gain * (self.goal_ned - p_ned)
             return Setpoint(limit(v, self.command.max_speed_mps), GuidanceState.ARRIVED)
-        if not self.inside_domain(p_ned) and self.failsafe.outside_domain is OutsideDomain.HOLD:
+        x = self.frame.to_model(p_ned)
+        x0 = np.clip(x, self.domain_lo, self.domain_hi)
+        if np.any(x0 != x) and self.failsafe.outside_domain is OutsideDomain.HOLD:
             return hold(f"position {np.round(p_ned, 3).tolist()} is outside the model's domain")
         try:
-            v = self.field_velocity_ned(p_ned)
+            v_model = self.field.velocity(x0)
+            v = self.gain * self.frame.direction_to_ned(v_model)
+            direction = self.pursuit_direction(x0, v_model) if self.command.lookahead_m > 0 else v
         except (ArithmeticError, ValueError) as exc:
             return Setpoint(ZERO.copy(), GuidanceState.FAULT, f"field error: {exc}")
-        if not np.all(np.isfinite(v)):
+        if not (np.all(np.isfinite(v)) and np.all(np.isfinite(direction))):
             return Setpoint(ZERO.copy(), GuidanceState.FAULT, f"field gave {v.tolist()} at {p_ned.tolist()}")
         speed = float(np.hypot(*v))
         if speed <= 1e-12:
             return Setpoint(ZERO.copy(), GuidanceState.GUIDING)
-        direction = self.pursuit_direction(p_ned) if self.command.lookahead_m > 0 else v / speed
+        direction = direction / float(np.hypot(*direction))
         if heading_rad is not None and self.command.turn_slowdown:
             error = math.atan2(direction[1], direction[0]) - heading_rad
             speed *= max(math.cos(error), 0.0)  # full speed on course, none while facing away
         speed = min(max(speed, self.command.min_speed_mps), self.command.max_speed_mps)
         return Setpoint(direction * speed, GuidanceState.GUIDING)
 
-    def pursuit_direction(self, p_ned: np.ndarray) -> np.ndarray:
-        """Unit NED direction toward the point ``lookahead_m`` along the field's streamline from ``p_ned``.
+    def pursuit_direction(self, x0: np.ndarray, v0: np.ndarray) -> np.ndarray:
+        """NED direction (not normalised) toward the point ``lookahead_m`` along the field's streamline
+        from model point ``x0`` (where the field is ``v0``).
 
         Pure pursuit of the field's own streamline: a boat with a bounded turn rate anticipates the
         field's turns instead of overshooting them, and near the goal it aims at the goal itself.
         """
-        x0 = np.clip(self.frame.to_model(p_ned), self.domain_lo, self.domain_hi)
-        length = self.command.lookahead_m / self.frame.scale  # [model units]
-        h = length / PURSUIT_STEPS
+        h = self.command.lookahead_m / self.frame.scale / PURSUIT_STEPS  # [model units]
         goal = np.asarray(self.frame.goal_model, dtype=float)
-        x = x0
-        for _ in range(PURSUIT_STEPS):
+        x, v = x0, v0
+        for k in range(PURSUIT_STEPS):
             if np.hypot(*(goal - x)) <= h:
                 x = goal
                 break
-            v = self.field.velocity(x)
+            if k:
+                v = self.field.velocity(x)
             norm = float(np.hypot(*v))
-            if not norm > 1e-12:  # zero or NaN: stop here (NaN is caught below)
+            if not norm > 1e-12:  # zero or NaN: stop here (NaN is caught by the caller)
                 break
             x = x + v * (h / norm)
         d = self.frame.direction_to_ned(x - x0)
-        norm = float(np.hypot(*d))
-        if not np.isfinite(norm) or norm <= 1e-12:
-            d = self.frame.direction_to_ned(self.field.velocity(x0))
-            norm = float(np.hypot(*d))
-        return d / norm
+        return d if float(np.hypot(*d)) > 1e-12 else self.frame.direction_to_ned(v0)
 
     def sample_grid(self, n: int) -> dict:
         """The field over the domain on an ``n x n`` grid, in NED (for dashboards): JSON-ready."""

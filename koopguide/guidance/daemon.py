@@ -38,8 +38,8 @@ from koopguide.guidance.tracker import KalmanTracker
 
 log = logging.getLogger(__name__)
 
-LATE_FACTOR = 1.25  # the timer commands when no fix-triggered command came for this many periods
-EARLY_FACTOR = 0.75  # a fix triggers a command once this many periods passed since the last one
+ATTITUDE_RATE_HZ = 10.0  # requested ATTITUDE rate (for the turn slowdown) at most
+SLACK = 0.25  # of a period: a fix this early triggers the due command; the timer acts this late
 GEODETIC_PAIR_S = 0.25  # local and global fixes this close in vehicle time place a geodetic goal
 SHUTDOWN_WAIT_S = 2.0  # wall seconds to see the exit mode confirmed
 LATENCY_WINDOW = 2000  # fix-to-setpoint latencies kept for the percentiles
@@ -81,7 +81,7 @@ class GuidanceDaemon:
         self.arrived = False
         self.goal_placed = cfg.frame.goal_latlon is None
         self.engaged = False  # GUIDED confirmed once; afterwards a mode change is the pilot's, not undone
-        self.last_cmd_t = -math.inf  # vehicle time of the last command decision
+        self.next_due = -math.inf  # vehicle time the next command is due (one per period on average)
         self.last_cmd = ZERO.copy()  # last velocity sent [m/s]
         self.max_cmd_speed = 0.0  # largest speed ever sent [m/s]
         self.setpoints_sent = 0
@@ -203,7 +203,7 @@ class GuidanceDaemon:
             return
         self.view.fix_t, self.view.fix_ned = t, fix[:2]
         self._place_geodetic_goal()
-        if self.clock.now() - self.last_cmd_t >= EARLY_FACTOR * self.period:
+        if self.clock.now() >= self.next_due - SLACK * self.period:
             self._cycle(arrived)
 
     def _place_geodetic_goal(self) -> None:
@@ -233,7 +233,8 @@ class GuidanceDaemon:
     def _cycle(self, fix_arrived: float | None = None) -> None:
         """One decision and (in GUIDED) one setpoint; ``fix_arrived`` (perf_counter) times the latency."""
         now = self.clock.now()
-        self.last_cmd_t = now
+        late = now - self.next_due
+        self.next_due = now + self.period if late > self.period or late < -self.period else self.next_due + self.period
         setpoint, send = self._decide(now)
         self._set_state(setpoint.state, setpoint.reason)
         if send:
@@ -304,8 +305,8 @@ class GuidanceDaemon:
         cfg = self.cfg
         rate = cfg.mavlink.position_rate_hz
         self._send(vehicle.message_interval(self.target, vehicle.MSG_LOCAL_POSITION_NED, rate))
-        if cfg.command.turn_slowdown:
-            self._send(vehicle.message_interval(self.target, vehicle.MSG_ATTITUDE, rate))
+        if cfg.command.turn_slowdown:  # the heading changes slowly: 10 Hz is plenty
+            self._send(vehicle.message_interval(self.target, vehicle.MSG_ATTITUDE, min(rate, ATTITUDE_RATE_HZ)))
         if cfg.frame.goal_latlon is not None:
             self._send(vehicle.message_interval(self.target, vehicle.MSG_GLOBAL_POSITION_INT, rate))
 
@@ -338,11 +339,9 @@ class GuidanceDaemon:
                 self._cycle()
                 await asyncio.sleep(0.05)
                 continue
-            since = self.clock.now() - self.last_cmd_t
-            if since >= LATE_FACTOR * self.period:
+            if self.clock.now() >= self.next_due + SLACK * self.period:
                 self._cycle()
-                since = 0.0
-            wait = self.clock.wall_seconds(LATE_FACTOR * self.period - since)
+            wait = self.clock.wall_seconds(self.next_due + SLACK * self.period - self.clock.now())
             await asyncio.sleep(min(max(wait, 0.0005), 0.1))
 
     async def _heartbeat_loop(self) -> None:

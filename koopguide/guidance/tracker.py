@@ -44,6 +44,7 @@ class KalmanTracker:
         self.t: float | None = None  # vehicle time of the state [s]
         self.rejections = 0
         self.resets = 0
+        self._models: dict[float, tuple[np.ndarray, np.ndarray]] = {}
 
     @property
     def initialised(self) -> bool:
@@ -83,10 +84,19 @@ class KalmanTracker:
     def _predict_to(self, t: float) -> None:
         dt = t - self.t
         if dt > 0:
-            self.kf.F = transition(dt)
-            self.kf.Q = Q_discrete_white_noise(dim=2, dt=dt, var=self.settings.accel_std_mps2**2, block_size=2)
+            self.kf.F, self.kf.Q = self._model(round(dt, 6))
             self.kf.predict()
             self.t = t
+
+    def _model(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """F and Q for a step of ``dt`` s, cached: fixes come at a few fixed intervals."""
+        cached = self._models.get(dt)
+        if cached is None:
+            if len(self._models) > 64:
+                self._models.clear()
+            Q = Q_discrete_white_noise(dim=2, dt=dt, var=self.settings.accel_std_mps2**2, block_size=2)
+            cached = self._models[dt] = (transition(dt), Q)
+        return cached
 
     def predict(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Position (N, E) and velocity (vN, vE) extrapolated to vehicle time ``t`` (state unchanged)."""

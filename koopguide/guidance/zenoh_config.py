@@ -18,7 +18,7 @@ from pathlib import Path
 
 import zenoh
 
-from koopguide.config import CONFIG_DIR, ConfigError
+from koopguide.config import CONFIG_DIR, ConfigError, read_config_text
 
 #: The shipped default configuration.
 DEFAULT_ZENOH_CONFIG_FILE = CONFIG_DIR / "zenoh.json5"
@@ -63,12 +63,7 @@ def _with_port(endpoint: str, port: int) -> str:
 
 
 def _read(path: Path) -> zenoh.Config:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: zenoh configuration file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read zenoh configuration ({exc})") from None
+    text = read_config_text(path, "zenoh configuration")
     if not text.strip():
         raise ConfigError(f"{path}: zenoh configuration file is empty (write {{}} for zenoh's own defaults)")
     try:

@@ -4,11 +4,13 @@ loss, a foreign system, garbage bytes, clean shutdown, and refusal of bad input 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -21,8 +23,11 @@ from .scripted_vehicle import GUIDED, LOITER, ScriptedVehicle
 
 
 def config(port: int, **overrides):
-    base = {"arm": True, "mavlink": {"endpoint": f"udp:127.0.0.1:{port}", "link_timeout_s": 1.0},
-            "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0}}
+    base = {
+        "arm": True,
+        "mavlink": {"endpoint": f"udp:127.0.0.1:{port}", "link_timeout_s": 1.0},
+        "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0},
+    }
     return settings.load(overrides={**base, **overrides})
 
 
@@ -37,41 +42,49 @@ async def until(predicate, within_s: float = 10.0) -> None:
         await asyncio.sleep(0.02)
 
 
+@contextlib.asynccontextmanager
+async def guiding(model: Path, cfg) -> AsyncIterator[tuple[GuidanceDaemon, ScriptedVehicle]]:
+    """A running service and a scripted boat it is already guiding; both stopped at exit."""
+    port = int(cfg.mavlink.endpoint.rsplit(":", 1)[1])
+    daemon = await GuidanceDaemon.create(cfg, model)
+    task = asyncio.create_task(daemon.run())
+    try:
+        with ScriptedVehicle(port, start_ned=(1.5, -1.5)) as boat:
+            await until(lambda: daemon.state.value == "guiding")
+            yield daemon, boat
+            assert not task.done(), "the service must not exit by itself"
+    finally:
+        daemon.stop()
+        await task
+
+
 @pytest.mark.timeout(60)
 def test_stale_positions_give_zero_velocity_within_a_cycle_then_guidance_resumes(zshape_model: Path) -> None:
-    port = free_udp_port()
-    cfg = config(port)
+    cfg = config(free_udp_port())
 
     async def scenario() -> None:
-        daemon = await GuidanceDaemon.create(cfg, zshape_model)
-        task = asyncio.create_task(daemon.run())
-        try:
-            with ScriptedVehicle(port, start_ned=(1.5, -1.5)) as boat:
-                await until(lambda: daemon.state.value == "guiding")
-                assert boat.mode == GUIDED and boat.armed
-                await asyncio.sleep(1.0)
-                assert max(speed(r) for r in boat.setpoints()) > 0.1
-                boat.pause_positions = True
-                t_gap = boat.t
-                await asyncio.sleep(2.5)
-                during = boat.setpoints(since=t_gap)
-                # stale after 0.5 s, +1 command period (0.1 s) +latency margin: every later setpoint is zero
-                late = [r for r in during if r.t > t_gap + 0.5 + 0.1 + 0.1]
-                assert len(late) >= 10, "setpoints must keep coming (zero) while positions are missing"
-                assert all(speed(r) == 0.0 for r in late)
-                assert daemon.state.value == "hold"
-                boat.pause_positions = False
-                t_back = boat.t
-                await until(lambda: daemon.state.value == "guiding", 5.0)
-                await asyncio.sleep(0.5)
-                assert any(speed(r) > 0.05 for r in boat.setpoints(since=t_back))
-                # every setpoint is velocity-only in LOCAL_NED, never above the limit
-                for r in boat.setpoints():
-                    assert r.msg.type_mask == 3559 and r.msg.coordinate_frame == 1
-                    assert speed(r) <= cfg.command.max_speed_mps + 1e-9
-        finally:
-            daemon.stop()
-            await task
+        async with guiding(zshape_model, cfg) as (daemon, boat):
+            assert boat.mode == GUIDED and boat.armed
+            await asyncio.sleep(1.0)
+            assert max(speed(r) for r in boat.setpoints()) > 0.1
+            boat.pause_positions = True
+            t_gap = boat.t
+            await asyncio.sleep(2.5)
+            during = boat.setpoints(since=t_gap)
+            # stale after 0.5 s, +1 command period (0.1 s) +latency margin: every later setpoint is zero
+            late = [r for r in during if r.t > t_gap + 0.5 + 0.1 + 0.1]
+            assert len(late) >= 10, "setpoints must keep coming (zero) while positions are missing"
+            assert all(speed(r) == 0.0 for r in late)
+            assert daemon.state.value == "hold"
+            boat.pause_positions = False
+            t_back = boat.t
+            await until(lambda: daemon.state.value == "guiding", 5.0)
+            await asyncio.sleep(0.5)
+            assert any(speed(r) > 0.05 for r in boat.setpoints(since=t_back))
+            # every setpoint is velocity-only in LOCAL_NED, never above the limit
+            for r in boat.setpoints():
+                assert r.msg.type_mask == 3559 and r.msg.coordinate_frame == 1
+                assert speed(r) <= cfg.command.max_speed_mps + 1e-9
 
     asyncio.run(scenario())
 
@@ -81,22 +94,14 @@ def test_link_loss_waits_and_recovers_without_exiting(zshape_model: Path) -> Non
     port = free_udp_port()
 
     async def scenario() -> None:
-        daemon = await GuidanceDaemon.create(config(port), zshape_model)
-        task = asyncio.create_task(daemon.run())
-        try:
-            with ScriptedVehicle(port, start_ned=(1.5, -1.5)) as boat:
-                await until(lambda: daemon.state.value == "guiding")
-                boat.silent = True
-                await until(lambda: daemon.state.value == "hold", 2.0)  # positions stale first
-                await until(lambda: daemon.state.value == "waiting", 3.0)  # then the heartbeat is missed
-                assert not task.done()
-                boat.silent = False
-                await until(lambda: daemon.state.value == "guiding", 5.0)
-                states = [s for _, s in daemon.transitions]
-                assert states[-4:] == ["guiding", "hold", "waiting", "guiding"]
-        finally:
-            daemon.stop()
-            await task
+        async with guiding(zshape_model, config(port)) as (daemon, boat):
+            boat.silent = True
+            await until(lambda: daemon.state.value == "hold", 2.0)  # positions stale first
+            await until(lambda: daemon.state.value == "waiting", 3.0)  # then the heartbeat is missed
+            boat.silent = False
+            await until(lambda: daemon.state.value == "guiding", 5.0)
+            states = [s for _, s in daemon.transitions]
+            assert states[-4:] == ["guiding", "hold", "waiting", "guiding"]
 
     asyncio.run(scenario())
 
@@ -106,43 +111,50 @@ def test_foreign_system_and_garbage_are_ignored(zshape_model: Path) -> None:
     port = free_udp_port()
 
     async def scenario() -> None:
-        daemon = await GuidanceDaemon.create(config(port), zshape_model)
-        task = asyncio.create_task(daemon.run())
-        try:
-            with ScriptedVehicle(port, start_ned=(1.5, -1.5)) as boat:
-                await until(lambda: daemon.state.value == "guiding")
-                spoofer = ScriptedVehicle(port, start_ned=(40.0, 40.0), sysid=2)
-                with spoofer:
-                    spoofer.mode, spoofer.armed = 0, False
-                    for _ in range(20):
-                        spoofer.conn.write(b"\xfd\x09garbage-bytes-not-mavlink\x00\x01")
-                        await asyncio.sleep(0.02)
-                    await asyncio.sleep(1.0)
-                p, _ = daemon.tracker.predict(daemon.clock.now())
-                assert math.hypot(p[0] - boat.n, p[1] - boat.e) < 0.2, "the spoofed position must not be used"
-                assert daemon.view.mode == GUIDED and daemon.view.armed
-                assert daemon.link.stats.foreign > 10 and daemon.link.stats.corrupt > 0
-                assert daemon.state.value == "guiding"
-        finally:
-            daemon.stop()
-            await task
+        async with guiding(zshape_model, config(port)) as (daemon, boat):
+            spoofer = ScriptedVehicle(port, start_ned=(40.0, 40.0), sysid=2)
+            with spoofer:
+                spoofer.mode, spoofer.armed = 0, False
+                for _ in range(20):
+                    spoofer.conn.write(b"\xfd\x09garbage-bytes-not-mavlink\x00\x01")
+                    await asyncio.sleep(0.02)
+                await asyncio.sleep(1.0)
+            p, _ = daemon.tracker.predict(daemon.clock.now())
+            assert math.hypot(p[0] - boat.n, p[1] - boat.e) < 0.2, "the spoofed position must not be used"
+            assert daemon.view.mode == GUIDED and daemon.view.armed
+            assert daemon.link.stats.foreign > 10 and daemon.link.stats.corrupt > 0
+            assert daemon.state.value == "guiding"
 
     asyncio.run(scenario())
 
 
 def run_service(args: list[str]) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "koopguide", "run", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "koopguide", "run", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
 
 
 @pytest.mark.timeout(60)
 def test_sigterm_sends_zero_velocity_then_loiter_and_exits_0(zshape_model: Path, tmp_path: Path) -> None:
     port = free_udp_port()
     zenoh_file = tmp_path / "zenoh.json5"
-    zenoh_file.write_text('{ mode: "peer", scouting: { multicast: { enabled: false } }, '
-                          f'listen: {{ endpoints: ["tcp/127.0.0.1:{free_udp_port()}"] }} }}')
-    proc = run_service(["--model", str(zshape_model), "--mavlink", f"udp:127.0.0.1:{port}", "--arm",
-                        "--goal-ned", "0,0", "--zenoh-config", str(zenoh_file)])
+    zenoh_file.write_text(
+        '{ mode: "peer", scouting: { multicast: { enabled: false } }, '
+        f'listen: {{ endpoints: ["tcp/127.0.0.1:{free_udp_port()}"] }} }}'
+    )
+    proc = run_service(
+        [
+            "--model",
+            str(zshape_model),
+            "--mavlink",
+            f"udp:127.0.0.1:{port}",
+            "--arm",
+            "--goal-ned",
+            "0,0",
+            "--zenoh-config",
+            str(zenoh_file),
+        ]
+    )
     try:
         with ScriptedVehicle(port, start_ned=(1.5, -1.5)) as boat:
             assert boat.wait_for(lambda: any(speed(r) > 0.05 for r in boat.setpoints()), 20.0), proc.stderr
@@ -183,7 +195,12 @@ def test_bad_input_is_refused_before_anything_is_sent(case: str, zshape_model: P
         assert proc.returncode == 2, err
         lines = [line for line in err.strip().splitlines() if line]
         assert len(lines) == 1 and lines[0].startswith("koopguide: error:"), err
-        expected = {"corrupt_model": "bad.pt", "missing_model": "absent.pt", "unknown_key": "command.rat_hz",
-                    "bad_type": "command.rate_hz", "bad_endpoint": "bogus"}[case]
+        expected = {
+            "corrupt_model": "bad.pt",
+            "missing_model": "absent.pt",
+            "unknown_key": "command.rat_hz",
+            "bad_type": "command.rate_hz",
+            "bad_endpoint": "bogus",
+        }[case]
         assert expected in lines[0]
         assert boat.received == [], "nothing may reach the vehicle"
