@@ -39,7 +39,7 @@ from koopguide.guidance.tracker import KalmanTracker
 log = logging.getLogger(__name__)
 
 ATTITUDE_RATE_HZ = 10.0  # requested ATTITUDE rate (for the turn slowdown) at most
-SLACK = 0.25  # of a period: a fix this early triggers the due command; the timer acts this late
+SLACK = 0.25  # of a period: the timer commands this late when no fix triggered the due command
 GEODETIC_PAIR_S = 0.25  # local and global fixes this close in vehicle time place a geodetic goal
 SHUTDOWN_WAIT_S = 2.0  # wall seconds to see the exit mode confirmed
 LATENCY_WINDOW = 2000  # fix-to-setpoint latencies kept for the percentiles
@@ -81,7 +81,8 @@ class GuidanceDaemon:
         self.arrived = False
         self.goal_placed = cfg.frame.goal_latlon is None
         self.engaged = False  # GUIDED confirmed once; afterwards a mode change is the pilot's, not undone
-        self.next_due = -math.inf  # vehicle time the next command is due (one per period on average)
+        self.next_due = -math.inf  # vehicle time the next command is due
+        self.fix_interval = 0.05  # typical vehicle time between position fixes [s], learned from them
         self.last_cmd = ZERO.copy()  # last velocity sent [m/s]
         self.max_cmd_speed = 0.0  # largest speed ever sent [m/s]
         self.setpoints_sent = 0
@@ -201,9 +202,12 @@ class GuidanceDaemon:
             log.warning("position estimate restarted at %s (jump or time gap)", np.round(fix[:2], 3).tolist())
         if not result.accepted:
             return
+        if self.view.fix_t is not None and t > self.view.fix_t:  # typical interval between fixes
+            self.fix_interval += 0.1 * (min(t - self.view.fix_t, 1.0) - self.fix_interval)
         self.view.fix_t, self.view.fix_ned = t, fix[:2]
         self._place_geodetic_goal()
-        if self.clock.now() >= self.next_due - SLACK * self.period:
+        # A fix within half a fix interval of the due time triggers the command (so it goes out at once).
+        if self.clock.now() >= self.next_due - min(SLACK * self.period, 0.5 * self.fix_interval):
             self._cycle(arrived)
 
     def _place_geodetic_goal(self) -> None:
@@ -233,8 +237,7 @@ class GuidanceDaemon:
     def _cycle(self, fix_arrived: float | None = None) -> None:
         """One decision and (in GUIDED) one setpoint; ``fix_arrived`` (perf_counter) times the latency."""
         now = self.clock.now()
-        late = now - self.next_due
-        self.next_due = now + self.period if late > self.period or late < -self.period else self.next_due + self.period
+        self.next_due = now + self.period
         setpoint, send = self._decide(now)
         self._set_state(setpoint.state, setpoint.reason)
         if send:
