@@ -27,7 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("out"), help="folder for the model cache and the plot")
     p.add_argument("--speedup", type=float, default=10.0, help="simulated seconds per wall second")
     p.add_argument("--start", type=int, default=0, help="which Zshape demonstration to start from (0-6)")
-    p.add_argument("--current-mps", type=float, default=0.03, help="cross current speed (toward the east)")
+    p.add_argument("--current-mps", type=float, default=0.03,
+                   help="speed of the current toward the north, across the field's final leg")
     p.add_argument("--zenoh-config", type=Path, help="zenoh config (JSON5) replacing the loopback default")
     p.add_argument("--timeout-s", type=float, default=120.0, help="simulated seconds allowed to arrive")
     p.set_defaults(run=cmd_demo)

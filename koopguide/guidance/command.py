@@ -127,7 +127,7 @@ class GuidanceLaw:
         direction = direction / float(np.hypot(*direction))
         if heading_rad is not None and self.command.turn_slowdown:
             error = math.atan2(direction[1], direction[0]) - heading_rad
-            speed *= max(math.cos(error), 0.0)  # full speed on course, none while facing away
+            speed *= max(math.cos(error), 0.0)  # full speed on course; min_speed_mps while facing away
         speed = min(max(speed, self.command.min_speed_mps), self.command.max_speed_mps)
         return Setpoint(direction * speed, GuidanceState.GUIDING)
 

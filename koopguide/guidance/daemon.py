@@ -141,9 +141,10 @@ class GuidanceDaemon:
 
     async def _shutdown(self) -> None:
         """Zero velocity, then the exit mode (only if we are still the one driving, in GUIDED)."""
-        self._send_velocity(ZERO)
+        sent = self._send_velocity(ZERO)
         if self.view.mode != vehicle.GUIDED or not self._link_up():
-            log.info("shutdown: zero velocity sent; vehicle mode %s left as it is", vehicle.mode_name(self.view.mode))
+            log.info("shutdown: %s; vehicle mode %s left as it is",
+                     "zero velocity sent" if sent else "link down, nothing sent", vehicle.mode_name(self.view.mode))
             return
         mode = vehicle.LOITER if self.cfg.failsafe.on_exit is ExitMode.LOITER else vehicle.HOLD
         deadline = time.monotonic() + SHUTDOWN_WAIT_S
@@ -317,7 +318,7 @@ class GuidanceDaemon:
     def _send(self, msg: Any) -> bool:
         return self.link is not None and self.link.send(msg)
 
-    def _send_velocity(self, v: np.ndarray, yaw: float | None = None) -> None:
+    def _send_velocity(self, v: np.ndarray, yaw: float | None = None) -> bool:
         v = np.asarray(v, dtype=float)
         if not np.all(np.isfinite(v)):  # the last line of defence: never put a NaN on the wire
             v = ZERO
@@ -326,6 +327,8 @@ class GuidanceDaemon:
             self.last_cmd = v.copy()
             self.setpoints_sent += 1
             self.max_cmd_speed = max(self.max_cmd_speed, float(np.hypot(*v)))
+            return True
+        return False
 
     def _set_state(self, state: GuidanceState, reason: str | None) -> None:
         if state is not self.state:
@@ -357,17 +360,18 @@ class GuidanceDaemon:
         period = 1.0 / self.cfg.status.rate_hz
         while True:
             if self.bus is not None:
+                self._seq += 1
                 self.bus.publish(self.status())
             await asyncio.sleep(period)
 
     # ------------------------------------------------------------------------------ status
     def status(self) -> dict[str, Any]:
         """The status document (DESIGN.md "Zenoh status"): NED metres, m/s, seconds."""
-        self._seq += 1
         now = self.clock.now()
         position = velocity = distance = None
-        if self.tracker.initialised:
-            p, v = self.tracker.predict(now)
+        if self.tracker.initialised and self.view.fix_t is not None:
+            # a stale estimate is not run on: it stays where the last fix (plus the stale allowance) put it
+            p, v = self.tracker.predict(min(now, self.view.fix_t + self.cfg.failsafe.stale_after_s))
             position, velocity = _rounded(p), _rounded(v)
             distance = round(self.law.distance_to_goal(p), 4)
         age = self.position_age(now)
@@ -403,6 +407,8 @@ class GuidanceDaemon:
             raise ValueError(f"field query: n must be an integer, got {text!r}") from None
         if not 2 <= n <= 200:
             raise ValueError(f"field query: n must be 2 .. 200, got {n}")
+        if not self.goal_placed:
+            raise ValueError("field query: the geodetic goal is not placed yet (no GLOBAL_POSITION_INT so far)")
         return self.law.sample_grid(n)
 
     def config_snapshot(self) -> dict[str, Any]:

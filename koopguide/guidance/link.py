@@ -156,8 +156,8 @@ class MavlinkLink:
             try:
                 await self._open()
             except OSError as exc:
-                log.info("MAVLink %s: reconnect failed (%s); next try in %.1f s", self.endpoint.text, exc, delay)
                 delay = min(2.0 * delay, self.settings.reconnect_max_s)
+                log.info("MAVLink %s: reconnect failed (%s); next try in %.1f s", self.endpoint.text, exc, delay)
             else:
                 self.stats.reconnects += 1
                 return

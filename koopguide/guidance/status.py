@@ -5,7 +5,7 @@ One status is one compact JSON object (UTF-8). Frames and units: positions are l
 refused, JSON has no spelling for them). Required keys, in publication order:
 
 ``t``                  float   unix wall time of publication [s]
-``seq``                int     publication counter of this daemon, from 0, +1 per status
+``seq``                int     publication counter of this daemon, from 1, +1 per status
 ``vehicle_id``         str     the vehicle's id, also the key segment: 1-64 of ``A-Z a-z 0-9 _ -``
 ``state``              str     one of :data:`STATES`: idle, waiting, guiding, arrived, hold, fault
 ``mode``               str | None   the autopilot's flight mode, e.g. ``"GUIDED"``; None before a heartbeat
@@ -20,8 +20,8 @@ refused, JSON has no spelling for them). Required keys, in publication order:
 ``loop_latency_ms``    {"p50": float | None, "p99": float | None}  guidance loop latency percentiles [ms]
 ``model``              str              the model file the daemon guides with
 
-Any other key is an optional extra (for example ``vehicle_time_s``, ``link``, ``fault``,
-``current_ned``): it is passed through unchanged and only has to be finite JSON.
+Any other key is an optional extra (the daemon sends ``vehicle_time_s``, ``reason``
+and ``link``): it is passed through unchanged and only has to be finite JSON.
 
 :func:`encode_status` validates then serialises; :func:`decode_status` parses then validates. Both raise
 :class:`StatusFormatError` naming the offending key and the value seen.

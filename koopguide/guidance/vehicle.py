@@ -22,7 +22,7 @@ ROVER_MODES = {
 MODE_NAMES = {number: name for name, number in ROVER_MODES.items()}
 GUIDED, LOITER, HOLD = ROVER_MODES["GUIDED"], ROVER_MODES["LOITER"], ROVER_MODES["HOLD"]
 
-MASK_VELOCITY = 3559  # 0x0DE7: vx, vy, vz used; position, acceleration, yaw and yaw rate ignored
+MASK_VELOCITY = 3559  # 0x0DE7: vx, vy used; position, vz, acceleration, yaw and yaw rate ignored
 MASK_VELOCITY_YAW = 2535  # 0x09E7: velocity and yaw
 MSG_LOCAL_POSITION_NED = 32
 MSG_GLOBAL_POSITION_INT = 33
