@@ -204,3 +204,38 @@ def test_bad_input_is_refused_before_anything_is_sent(case: str, zshape_model: P
         }[case]
         assert expected in lines[0]
         assert boat.received == [], "nothing may reach the vehicle"
+
+
+@pytest.mark.timeout(90)
+def test_a_lost_tcp_link_is_reopened_with_back_off(zshape_model: Path) -> None:
+    """The vehicle (the simulator, serving tcpin) goes away and comes back on the same port."""
+    from sitl import config as sitl_config
+    from sitl.runner import SimulationThread
+
+    port = free_udp_port()
+    sim_cfg = sitl_config.load(
+        overrides={"speedup": 5.0, "start_poses": [[1.5, -1.5, 90.0]], "world": {"walls": False},
+                   "mavlink": {"endpoints": [f"tcpin:127.0.0.1:{port}"]}}
+    )
+    cfg = config(port, mavlink={"endpoint": f"tcp:127.0.0.1:{port}", "reconnect_min_s": 0.2, "reconnect_max_s": 1.0})
+
+    async def scenario() -> None:
+        daemon = None
+        try:
+            with SimulationThread(sim_cfg):
+                daemon = await GuidanceDaemon.create(cfg, zshape_model)
+                task = asyncio.create_task(daemon.run())
+                await until(lambda: daemon.state.value == "guiding", 15.0)
+            await until(lambda: daemon.state.value != "guiding", 5.0)  # the vehicle is gone
+            await asyncio.sleep(2.0)  # a few failed reconnects with back-off, and the service keeps running
+            assert not task.done() and daemon.link.conn is None
+            with SimulationThread(sim_cfg):
+                await until(lambda: daemon.link.stats.reconnects >= 1, 10.0)
+                await until(lambda: daemon.view.link_up(time.monotonic(), 3.0) and daemon.position_age() is not None
+                            and daemon.position_age() < 0.5, 10.0)
+        finally:
+            if daemon is not None:
+                daemon.stop()
+                await task
+
+    asyncio.run(scenario())
