@@ -78,6 +78,7 @@ def test_boats_sharing_one_link_answer_only_for_themselves():
         try:
             conn.mav.heartbeat_send(6, 8, 0, 0, 0)  # a udpin link answers those who have spoken
             gcs = Gcs(conn, target_system=2)
+            gcs.wait_type("GLOBAL_POSITION_INT", sim_timeout=3.0)  # LOITER needs a position fix first
             ack = gcs.set_mode(5)
             assert ack.get_srcSystem() == 2 and ack.result == mavlink.MAV_RESULT_ACCEPTED
             seen = set()
