@@ -108,7 +108,8 @@ class Scenario:
 def scenario(model: Path, rate_hz: float, seconds: float) -> Scenario:
     from koopguide import data
     from koopguide.field import load_field
-    from koopguide.guidance.mission import demo_start_pose, free_udp_port, model_frame, sim_overrides, tank_around
+    from koopguide.guidance.frames import ModelFrame
+    from koopguide.guidance.mission import demo_start_pose, free_udp_port, sim_overrides, tank_around
 
     field = load_field(model)
     source = field.meta.get("data", {}).get("source")
@@ -127,7 +128,7 @@ def scenario(model: Path, rate_hz: float, seconds: float) -> Scenario:
     needed_scale = PATH_MARGIN * cfg.command.max_speed_mps * seconds / path_units
     if needed_scale > cfg.frame.scale:
         cfg = settings.load(overrides={**overrides, "frame": {"scale": needed_scale}})
-    frame = model_frame(field, cfg)
+    frame = ModelFrame.place(field.goal, cfg.frame)
     pose = demo_start_pose(field, frame, demo[0])
     world = tank_around(frame.to_ned(demo))
     sim = sim_overrides(pose, port, world, speedup=1.0)

@@ -22,7 +22,13 @@ import numpy as np
 
 from koopguide.field import FlowField
 from koopguide.guidance.frames import ModelFrame
-from koopguide.guidance.settings import ArrivalSettings, CommandSettings, FailsafeSettings, OutsideDomain
+from koopguide.guidance.settings import (
+    ArrivalSettings,
+    CommandSettings,
+    FailsafeSettings,
+    GuidanceConfig,
+    OutsideDomain,
+)
 
 
 class GuidanceState(enum.Enum):
@@ -77,16 +83,17 @@ class GuidanceLaw:
         self.v_max = max_field_speed(field, self.domain_lo, self.domain_hi, command.speed_grid)
         self.gain = command.max_speed_mps / self.v_max  # m/s per (model unit / learned step)
 
+    @classmethod
+    def from_config(cls, field: FlowField, cfg: GuidanceConfig) -> GuidanceLaw:
+        """The law for ``field`` placed and limited as ``cfg`` says."""
+        return cls(field, ModelFrame.place(field.goal, cfg.frame), cfg.command, cfg.arrival, cfg.failsafe)
+
     @property
     def goal_ned(self) -> np.ndarray:
         return np.asarray(self.frame.goal_ned, dtype=float)
 
     def distance_to_goal(self, p_ned: np.ndarray) -> float:
         return float(np.hypot(*(np.asarray(p_ned) - self.goal_ned)))
-
-    def inside_domain(self, p_ned: np.ndarray) -> bool:
-        x = self.frame.to_model(p_ned)
-        return bool(np.all(x >= self.domain_lo) and np.all(x <= self.domain_hi))
 
     def field_velocity_ned(self, p_ned: np.ndarray) -> np.ndarray:
         """The scaled field velocity at ``p_ned`` [m/s] (the paper's rule; may contain NaN from a bad model)."""
@@ -156,11 +163,8 @@ class GuidanceLaw:
 
     def sample_grid(self, n: int) -> dict:
         """The field over the domain on an ``n x n`` grid, in NED (for dashboards): JSON-ready."""
-        xs = np.linspace(self.domain_lo[0], self.domain_hi[0], n)
-        ys = np.linspace(self.domain_lo[1], self.domain_hi[1], n)
-        X = np.stack(np.meshgrid(xs, ys, indexing="xy"), axis=-1).reshape(-1, 2)
-        P = self.frame.to_ned(X)
-        V = self.gain * self.frame.direction_to_ned(self.field.velocity(X))
+        P = self.frame.to_ned(box_grid(self.domain_lo, self.domain_hi, n))
+        V = self.field_velocity_ned(P)
         return {
             "frame": "local_ned",
             "units": {"position_ned": "m", "velocity_ned": "m/s"},
@@ -179,12 +183,16 @@ def limit(v: np.ndarray, max_speed: float) -> np.ndarray:
 
 def max_field_speed(field: FlowField, lo: np.ndarray, hi: np.ndarray, n: int) -> float:
     """The largest field speed [model units / learned step] on an ``n x n`` grid over the box [lo, hi]."""
-    xs, ys = np.linspace(lo[0], hi[0], n), np.linspace(lo[1], hi[1], n)
-    X = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    speeds = np.linalg.norm(field.velocity(X), axis=1)
+    speeds = np.linalg.norm(field.velocity(box_grid(lo, hi, n)), axis=1)
     if not np.all(np.isfinite(speeds)):
         raise ValueError("the model's field is not finite over its domain (NaN or inf velocities)")
     v_max = float(speeds.max())
     if v_max <= 0.0:
         raise ValueError("the model's field is zero over its whole domain; nothing to follow")
     return v_max
+
+
+def box_grid(lo: np.ndarray, hi: np.ndarray, n: int) -> np.ndarray:
+    """``(n * n, 2)`` points of an ``n x n`` grid over the box [lo, hi], x varying fastest."""
+    X = np.meshgrid(np.linspace(lo[0], hi[0], n), np.linspace(lo[1], hi[1], n))
+    return np.stack(X, axis=-1).reshape(-1, 2)

@@ -31,7 +31,6 @@ from koopguide.geodesy import geodetic_to_ned
 from koopguide.guidance import vehicle
 from koopguide.guidance.clock import VehicleClock
 from koopguide.guidance.command import ZERO, GuidanceLaw, GuidanceState, Setpoint, hold
-from koopguide.guidance.frames import ModelFrame
 from koopguide.guidance.link import MavlinkLink
 from koopguide.guidance.settings import ArrivalAction, ExitMode, GuidanceConfig
 from koopguide.guidance.tracker import KalmanTracker
@@ -87,7 +86,6 @@ class GuidanceDaemon:
         self.max_cmd_speed = 0.0  # largest speed ever sent [m/s]
         self.setpoints_sent = 0
         self.transitions: list[tuple[float, str]] = []  # (vehicle time, state) on each change
-        self.arrived_event = asyncio.Event()
         self._stop = asyncio.Event()
         self._last_request: dict[str, float] = {}  # what -> wall time last sent
         self._streams_requested_wall: float | None = None
@@ -99,10 +97,7 @@ class GuidanceDaemon:
     @classmethod
     async def create(cls, cfg: GuidanceConfig, model_path: Path, zenoh_config: Any | None = None) -> GuidanceDaemon:
         """Refuse a bad model or config (ValueError) before opening anything; then open MAVLink and zenoh."""
-        field = load_field(model_path)
-        frame = ModelFrame(goal_model=tuple(field.goal), goal_ned=cfg.frame.goal_ned, scale=cfg.frame.scale,
-                           heading_deg=cfg.frame.heading_deg)
-        law = GuidanceLaw(field, frame, cfg.command, cfg.arrival, cfg.failsafe)
+        law = GuidanceLaw.from_config(load_field(model_path), cfg)
         daemon = cls(cfg, Path(model_path), law)
         log.info("model %s: domain max field speed %.4g units/step -> %.3f m/s (gain %.4g)", model_path,
                  law.v_max, cfg.command.max_speed_mps, law.gain)
@@ -171,7 +166,6 @@ class GuidanceDaemon:
             self.view.global_fix = (msg.time_boot_ms / 1000.0, msg.lat / 1e7, msg.lon / 1e7)
             self._place_geodetic_goal()
         elif kind == "COMMAND_ACK":
-            self.view.acks[msg.command] = msg.result
             if msg.result not in (0, 5):  # ACCEPTED, IN_PROGRESS
                 log.warning("vehicle refused command %d (MAV_RESULT %d)", msg.command, msg.result)
         elif kind == "STATUSTEXT":
@@ -286,7 +280,6 @@ class GuidanceDaemon:
         if setpoint.state is GuidanceState.ARRIVED and not self.arrived:
             self.arrived = True
             log.info("arrived: %.3f m from the goal at vehicle time %.1f s", self.law.distance_to_goal(p), now)
-            self.arrived_event.set()
             if cfg.arrival.on_arrival is not ArrivalAction.STATION_KEEP:
                 return self._decide(now)
         return setpoint, True
@@ -369,7 +362,7 @@ class GuidanceDaemon:
         """The status document (DESIGN.md "Zenoh status"): NED metres, m/s, seconds."""
         now = self.clock.now()
         position = velocity = distance = None
-        if self.tracker.initialised and self.view.fix_t is not None:
+        if self.view.fix_t is not None:
             # a stale estimate is not run on: it stays where the last fix (plus the stale allowance) put it
             p, v = self.tracker.predict(min(now, self.view.fix_t + self.cfg.failsafe.stale_after_s))
             position, velocity = _rounded(p), _rounded(v)

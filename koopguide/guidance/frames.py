@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from koopguide.guidance.settings import FrameSettings
+
 
 @dataclass(frozen=True)
 class ModelFrame:
@@ -28,6 +30,11 @@ class ModelFrame:
     goal_ned: tuple[float, float]  # [m]
     scale: float  # metres per model unit
     heading_deg: float  # compass heading of model +x [deg]
+
+    @classmethod
+    def place(cls, goal_model: np.ndarray, settings: FrameSettings) -> ModelFrame:
+        """The frame of ``settings`` (goal_ned, scale, heading_deg) for a model whose goal is ``goal_model``."""
+        return cls(tuple(float(v) for v in goal_model), settings.goal_ned, settings.scale, settings.heading_deg)
 
     @property
     def R(self) -> np.ndarray:

@@ -92,7 +92,6 @@ class MavlinkLink:
         self.on_message = on_message
         self.stats = LinkStats()
         self.conn: Any = None
-        self.connected = asyncio.Event()
         self._reader_fd: int | None = None
         self._reopen: asyncio.Task | None = None
         self._closed = False
@@ -124,7 +123,6 @@ class MavlinkLink:
             return
         self.conn = conn
         self._set_reader(conn.fd)
-        self.connected.set()
         log.info("MAVLink %s open", ep.text)
 
     def _drop(self, why: str) -> None:
@@ -143,7 +141,6 @@ class MavlinkLink:
             except OSError as exc:
                 log.debug("closing %s: %s", self.endpoint.text, exc)
             self.conn = None
-        self.connected.clear()
 
     def _schedule_reopen(self) -> None:
         if not self._closed and (self._reopen is None or self._reopen.done()):

@@ -13,28 +13,25 @@ import math
 import socket
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from koopguide.field import FlowField
+from koopguide.guidance.command import GuidanceLaw
 from koopguide.guidance.frames import ModelFrame
 from koopguide.guidance.settings import GuidanceConfig
 
 TANK_M = (4.5, 3.0)  # the paper's tank, N x E [m]
+DEMO_SETTLE_S = 20.0  # simulated seconds the demo keeps watching after arrival
 
 
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def model_frame(field_: FlowField, cfg: GuidanceConfig) -> ModelFrame:
-    return ModelFrame(goal_model=tuple(field_.goal), goal_ned=cfg.frame.goal_ned, scale=cfg.frame.scale,
-                      heading_deg=cfg.frame.heading_deg)
 
 
 def demo_start_pose(field_: FlowField, frame: ModelFrame, start: np.ndarray) -> tuple[float, float, float]:
@@ -70,8 +67,7 @@ class MissionResult:
     max_setpoint_mps: float
     final_distance_m: float
     max_distance_after_arrival_m: float | None
-    statuses: list[dict[str, Any]] = field(default_factory=list)
-    records: list[dict[str, Any]] = field(default_factory=list)  # the simulator's ground-truth records
+    law: GuidanceLaw  # the service's guidance law (its field, frame and speed gain)
 
 
 async def fly(cfg: GuidanceConfig, model: Path, sim_cfg: Any, timeout_s: float, settle_s: float = 20.0,
@@ -83,7 +79,6 @@ async def fly(cfg: GuidanceConfig, model: Path, sim_cfg: Any, timeout_s: float, 
     records: list[dict[str, Any]] = []
     daemon = await GuidanceDaemon.create(cfg, model, zenoh_config)
     runner = asyncio.create_task(daemon.run())
-    statuses: list[dict[str, Any]] = []
     try:
         with SimulationThread(sim_cfg, records):
             t_start = t_arrived = None
@@ -98,8 +93,7 @@ async def fly(cfg: GuidanceConfig, model: Path, sim_cfg: Any, timeout_s: float, 
                     t_arrived = t
                 if progress and t - last_print >= 5.0 and daemon.clock.started:
                     last_print = t
-                    statuses.append(daemon.status())
-                    print_progress(statuses[-1])
+                    print_progress(daemon.status())
                 if t_start is not None and t_arrived is None and t - t_start > timeout_s:
                     break
                 if t_arrived is not None and t - t_arrived >= settle_s:
@@ -110,13 +104,11 @@ async def fly(cfg: GuidanceConfig, model: Path, sim_cfg: Any, timeout_s: float, 
         if not runner.done():
             daemon.stop()
             await runner
-    result = summarize(daemon, records, t_start, t_arrived, statuses)
-    result.records = records
-    return result
+    return summarize(daemon, records, t_start, t_arrived)
 
 
-def summarize(daemon: Any, records: list[dict[str, Any]], t_start: float | None, t_arrived: float | None,
-              statuses: list[dict[str, Any]]) -> MissionResult:
+def summarize(daemon: Any, records: list[dict[str, Any]], t_start: float | None,
+              t_arrived: float | None) -> MissionResult:
     states = [r for r in records if r.get("kind") == "state"]
     track = np.array([[r["t"], r["n"], r["e"]] for r in states]) if states else np.zeros((0, 3))
     goal = daemon.law.goal_ned
@@ -129,7 +121,7 @@ def summarize(daemon: Any, records: list[dict[str, Any]], t_start: float | None,
         arrived=t_arrived is not None,
         arrival_time_s=None if t_arrived is None or t_start is None else t_arrived - t_start,
         track=track, transitions=list(daemon.transitions), max_setpoint_mps=daemon.max_cmd_speed,
-        final_distance_m=float(dist[-1]), max_distance_after_arrival_m=after, statuses=statuses,
+        final_distance_m=float(dist[-1]), max_distance_after_arrival_m=after, law=daemon.law,
     )
 
 
@@ -157,7 +149,7 @@ def demo_mission(model: Path, start_index: int, current_mps: float, speedup: flo
         "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0}, "command": {"max_speed_mps": 0.3},
     })
     field_ = load_field(model)
-    frame = model_frame(field_, cfg)
+    frame = ModelFrame.place(field_.goal, cfg.frame)
     starts = data.load_lasa("Zshape").trajectories
     if not 0 <= start_index < len(starts):
         raise ValueError(f"--start must be 0 .. {len(starts) - 1}, got {start_index}")
@@ -194,23 +186,18 @@ def run_demo(args: Any) -> int:
     print(f"koopguide demo: boat at N {pose[0]:.2f} E {pose[1]:.2f} m heading {pose[2]:.0f} deg, goal N 0 E 0, "
           f"current {args.current_mps:.2f} m/s toward north, simulator x{args.speedup:g}; "
           f"status on zenoh koopguide/{cfg.vehicle_id}/status (watch: koopguide monitor)", file=sys.stderr)
-    result = asyncio.run(fly(cfg, model, sim_cfg, args.timeout_s, settle_s=20.0, zenoh_config=zenoh_config,
-                             progress=True))
-    from koopguide.field import load_field
-    from koopguide.guidance.command import GuidanceLaw
-
-    field_ = load_field(model)
-    law = GuidanceLaw(field_, model_frame(field_, cfg), cfg.command, cfg.arrival, cfg.failsafe)
+    result = asyncio.run(fly(cfg, model, sim_cfg, args.timeout_s, settle_s=DEMO_SETTLE_S,
+                             zenoh_config=zenoh_config, progress=True))
     world = sim_cfg.world
     box = np.array([[world.north_m[0], world.east_m[0]], [world.north_m[1], world.east_m[1]]])
     flow = Flow(sim_cfg.flow, np.random.default_rng(0))
     png = args.out / "demo.png"
     verdict = (f"arrived in {result.arrival_time_s:.1f} s" if result.arrived
                else f"did not arrive within {args.timeout_s:g} s")
-    plot_mission(png, law.field_velocity_ned, box, result.track, pose[:2], cfg.frame.goal_ned, cfg.arrival.radius_m,
-                 lambda n, e: flow.velocity(n, e, 0.0), f"koopguide demo: Zshape, {verdict}")
+    plot_mission(png, result.law.field_velocity_ned, box, result.track, pose[:2], cfg.frame.goal_ned,
+                 cfg.arrival.radius_m, lambda n, e: flow.velocity(n, e, 0.0), f"koopguide demo: Zshape, {verdict}")
     after = result.max_distance_after_arrival_m
     print(f"koopguide demo: {verdict}; largest setpoint {result.max_setpoint_mps:.3f} m/s"
-          + (f"; within {after:.2f} m of the goal for {20:.0f} s after arrival" if after is not None else "")
+          + (f"; within {after:.2f} m of the goal for {DEMO_SETTLE_S:.0f} s after arrival" if after is not None else "")
           + f"; wrote {png}", file=sys.stderr)
     return 0 if result.arrived else 1

@@ -9,7 +9,7 @@ Velocity setpoints are SET_POSITION_TARGET_LOCAL_NED in MAV_FRAME_LOCAL_NED with
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -46,7 +46,6 @@ class VehicleView:
     fix_ned: np.ndarray | None = None  # its (N, E) [m]
     global_fix: tuple[float, float, float] | None = None  # (time s, lat deg, lon deg) of GLOBAL_POSITION_INT
     attitude: tuple[float, float] | None = None  # (time s, heading rad from north) of ATTITUDE
-    acks: dict[int, int] = field(default_factory=dict)  # command id -> last MAV_RESULT
 
     def link_up(self, now_wall: float, timeout_s: float) -> bool:
         return self.heartbeat_wall is not None and now_wall - self.heartbeat_wall <= timeout_s

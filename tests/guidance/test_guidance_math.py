@@ -44,10 +44,7 @@ def guidance_config(**overrides):
 
 
 def law_for(model: Path, **overrides) -> GuidanceLaw:
-    cfg = guidance_config(**overrides)
-    field = load_field(model)
-    f = ModelFrame(tuple(field.goal), cfg.frame.goal_ned, cfg.frame.scale, cfg.frame.heading_deg)
-    return GuidanceLaw(field, f, cfg.command, cfg.arrival, cfg.failsafe)
+    return GuidanceLaw.from_config(load_field(model), guidance_config(**overrides))
 
 
 def test_paper_speed_rule_maps_the_domain_maximum_to_max_speed_and_never_exceeds_it(zshape_model):
