@@ -30,14 +30,16 @@ from koopguide.field import load_field
 from koopguide.geodesy import geodetic_to_ned
 from koopguide.guidance import vehicle
 from koopguide.guidance.clock import VehicleClock
-from koopguide.guidance.command import ZERO, GuidanceLaw, GuidanceState, Setpoint, hold
+from koopguide.guidance.command import ZERO, GuidanceLaw, GuidanceState, Setpoint, along_current, hold
+from koopguide.guidance.current import CurrentEstimator
 from koopguide.guidance.link import MavlinkLink
 from koopguide.guidance.settings import ArrivalAction, ExitMode, GuidanceConfig
 from koopguide.guidance.tracker import KalmanTracker
 
 log = logging.getLogger(__name__)
 
-ATTITUDE_RATE_HZ = 10.0  # requested ATTITUDE rate (for the turn slowdown) at most
+ATTITUDE_RATE_HZ = 10.0  # requested ATTITUDE rate (turn slowdown, current estimate) at most
+ATTITUDE_PAIR_S = 0.2  # a heading this close in vehicle time to a fix pairs with it for the current estimate
 SLACK = 0.25  # of a period: the timer commands this late when no fix triggered the due command
 GEODETIC_PAIR_S = 0.25  # local and global fixes this close in vehicle time place a geodetic goal
 SHUTDOWN_WAIT_S = 2.0  # wall seconds to see the exit mode confirmed
@@ -71,6 +73,7 @@ class GuidanceDaemon:
         self.period = 1.0 / cfg.command.rate_hz  # vehicle seconds between setpoints
         self.clock = VehicleClock()
         self.tracker = KalmanTracker(cfg.estimator)
+        self.current = CurrentEstimator(cfg.estimator)
         self.view = vehicle.VehicleView()
         self.latency = LatencyWindow()
         self.link: MavlinkLink | None = None
@@ -78,6 +81,8 @@ class GuidanceDaemon:
         self.state = GuidanceState.IDLE
         self.reason: str | None = None
         self.arrived = False
+        self.arrived_t: float | None = None  # vehicle time of arrival [s]
+        self.settled = False  # after arrival: close enough to the goal (or long enough) to hand over to LOITER/HOLD
         self.goal_placed = cfg.frame.goal_latlon is None
         self.engaged = False  # GUIDED confirmed once; afterwards a mode change is the pilot's, not undone
         self.next_due = -math.inf  # vehicle time the next command is due
@@ -85,6 +90,7 @@ class GuidanceDaemon:
         self.last_cmd = ZERO.copy()  # last velocity sent [m/s]
         self.max_cmd_speed = 0.0  # largest speed ever sent [m/s]
         self.setpoints_sent = 0
+        self.mode_before_exit: str | None = None  # the vehicle's mode when shutdown began
         self.transitions: list[tuple[float, str]] = []  # (vehicle time, state) on each change
         self._stop = asyncio.Event()
         self._last_request: dict[str, float] = {}  # what -> wall time last sent
@@ -136,6 +142,7 @@ class GuidanceDaemon:
 
     async def _shutdown(self) -> None:
         """Zero velocity, then the exit mode (only if we are still the one driving, in GUIDED)."""
+        self.mode_before_exit = vehicle.mode_name(self.view.mode)
         sent = self._send_velocity(ZERO)
         if self.view.mode != vehicle.GUIDED or not self._link_up():
             log.info("shutdown: %s; vehicle mode %s left as it is",
@@ -160,8 +167,8 @@ class GuidanceDaemon:
         elif kind == "LOCAL_POSITION_NED":
             self._on_fix(msg, arrived)
         elif kind == "ATTITUDE":
-            if math.isfinite(msg.yaw):
-                self.view.attitude = (msg.time_boot_ms / 1000.0, float(msg.yaw))
+            if math.isfinite(msg.yaw) and math.isfinite(msg.yawspeed):
+                self.view.attitude = (msg.time_boot_ms / 1000.0, float(msg.yaw), float(msg.yawspeed))
         elif kind == "GLOBAL_POSITION_INT":
             self.view.global_fix = (msg.time_boot_ms / 1000.0, msg.lat / 1e7, msg.lon / 1e7)
             self._place_geodetic_goal()
@@ -200,6 +207,9 @@ class GuidanceDaemon:
         if self.view.fix_t is not None and t > self.view.fix_t:  # typical interval between fixes
             self.fix_interval += 0.1 * (min(t - self.view.fix_t, 1.0) - self.fix_interval)
         self.view.fix_t, self.view.fix_ned = t, fix[:2]
+        attitude = self.view.attitude
+        if attitude is not None and abs(attitude[0] - t) <= ATTITUDE_PAIR_S:
+            self.current.update(t, self.tracker.kf.x[[1, 3]], attitude[1], attitude[2])
         self._place_geodetic_goal()
         # A fix within half a fix interval of the due time triggers the command (so it goes out at once).
         if self.clock.now() >= self.next_due - min(SLACK * self.period, 0.5 * self.fix_interval):
@@ -257,7 +267,7 @@ class GuidanceDaemon:
             return hold(f"no fresh position for {age:.2f} s"), in_guided
         if not self.goal_placed:
             return Setpoint(ZERO, GuidanceState.WAITING, "waiting for GLOBAL_POSITION_INT to place the goal"), in_guided
-        if self.arrived and cfg.arrival.on_arrival is not ArrivalAction.STATION_KEEP:
+        if self.settled:
             keep = vehicle.LOITER if cfg.arrival.on_arrival is ArrivalAction.LOITER else vehicle.HOLD
             if view.mode != keep and in_guided:
                 self._request("mode", vehicle.set_mode(self.target, keep))
@@ -276,11 +286,21 @@ class GuidanceDaemon:
         p, _ = self.tracker.predict(now + cfg.command.lead_s)
         attitude = view.attitude
         heading = attitude[1] if attitude is not None and now - attitude[0] <= cfg.failsafe.stale_after_s else None
-        setpoint = self.law.decide(p, self.arrived, heading)
+        current = self.current.current_ned if heading is not None and self.current.updates else None
+        setpoint = self.law.decide(p, self.arrived, heading, current)
         if setpoint.state is GuidanceState.ARRIVED and not self.arrived:
-            self.arrived = True
+            self.arrived, self.arrived_t = True, now
             log.info("arrived: %.3f m from the goal at vehicle time %.1f s", self.law.distance_to_goal(p), now)
-            if cfg.arrival.on_arrival is not ArrivalAction.STATION_KEEP:
+        if self.arrived and cfg.arrival.on_arrival is not ArrivalAction.STATION_KEEP:
+            # Steer on onto the goal, facing along the current, before handing over: LOITER holds the point
+            # where it is switched on (backing or driving into the current), and a boat turns too slowly to
+            # face the current once LOITER has it.
+            distance = self.law.distance_to_goal(p)
+            done = distance <= cfg.arrival.settle_radius_m and along_current(heading, current, cfg.arrival.facing_deg)
+            if done or now - self.arrived_t >= cfg.arrival.settle_timeout_s:
+                self.settled = True
+                log.info("settled %.3f m from the goal after %.1f s; switching to %s", distance,
+                         now - self.arrived_t, cfg.arrival.on_arrival.value.upper())
                 return self._decide(now)
         return setpoint, True
 
@@ -302,7 +322,7 @@ class GuidanceDaemon:
         cfg = self.cfg
         rate = cfg.mavlink.position_rate_hz
         self._send(vehicle.message_interval(self.target, vehicle.MSG_LOCAL_POSITION_NED, rate))
-        if cfg.command.turn_slowdown:  # the heading changes slowly: 10 Hz is plenty
+        if cfg.command.turn_slowdown or cfg.command.current_compensation:  # the heading changes slowly: 10 Hz is plenty
             self._send(vehicle.message_interval(self.target, vehicle.MSG_ATTITUDE, min(rate, ATTITUDE_RATE_HZ)))
         if cfg.frame.goal_latlon is not None:
             self._send(vehicle.message_interval(self.target, vehicle.MSG_GLOBAL_POSITION_INT, rate))
@@ -387,6 +407,7 @@ class GuidanceDaemon:
             "model": str(self.model_path),
             "vehicle_time_s": round(now, 3),
             "reason": self.reason,
+            "current_ned": _rounded(self.current.current_ned) if self.current.updates else None,
             "link": {"up": self._link_up(), "received": link.received, "foreign": link.foreign,
                      "corrupt": link.corrupt, "sent": link.sent, "reconnects": link.reconnects} if link else None,
         }

@@ -67,6 +67,7 @@ class MissionResult:
     max_setpoint_mps: float
     final_distance_m: float
     max_distance_after_arrival_m: float | None
+    mode_before_exit: str | None  # the vehicle's mode when the service began to shut down
     law: GuidanceLaw  # the service's guidance law (its field, frame and speed gain)
 
 
@@ -122,6 +123,7 @@ def summarize(daemon: Any, records: list[dict[str, Any]], t_start: float | None,
         arrival_time_s=None if t_arrived is None or t_start is None else t_arrived - t_start,
         track=track, transitions=list(daemon.transitions), max_setpoint_mps=daemon.max_cmd_speed,
         final_distance_m=float(dist[-1]), max_distance_after_arrival_m=after, law=daemon.law,
+        mode_before_exit=daemon.mode_before_exit,
     )
 
 

@@ -25,7 +25,7 @@ MAX_RATE_HZ = 50.0
 class ArrivalAction(enum.Enum):
     LOITER = "loiter"  # the autopilot's LOITER holds position against a current
     HOLD = "hold"  # the autopilot's HOLD: motors stop (a boat drifts)
-    STATION_KEEP = "station_keep"  # keep sending velocities toward the goal
+    STATION_KEEP = "station_keep"  # keep steering onto the goal, crabbing into the current
 
 
 class OutsideDomain(enum.Enum):
@@ -85,6 +85,7 @@ class CommandSettings:
     max_speed_mps: float
     min_speed_mps: float
     turn_slowdown: bool
+    current_compensation: bool
     lookahead_m: float
     with_yaw: bool
     lead_s: float
@@ -107,9 +108,23 @@ class ArrivalSettings:
     radius_m: float
     on_arrival: ArrivalAction
     station_gain: float
+    capture_radius_m: float
+    approach_radius_m: float
+    facing_deg: float
+    settle_radius_m: float
+    settle_timeout_s: float
 
     def __post_init__(self) -> None:
         _positive(self, "arrival", "radius_m", "station_gain")
+        _finite(self, "arrival", "capture_radius_m", "approach_radius_m", "facing_deg", "settle_radius_m",
+                "settle_timeout_s")
+        _check(self.capture_radius_m >= 0, "arrival.capture_radius_m", self.capture_radius_m, ">= 0")
+        _check(self.approach_radius_m >= self.radius_m, "arrival.approach_radius_m", self.approach_radius_m,
+               f">= radius_m ({self.radius_m})")
+        _check(0 < self.facing_deg < 90, "arrival.facing_deg", self.facing_deg, "0 < angle < 90")
+        _check(0 <= self.settle_radius_m <= self.radius_m, "arrival.settle_radius_m", self.settle_radius_m,
+               f"0 .. radius_m ({self.radius_m})")
+        _check(self.settle_timeout_s >= 0, "arrival.settle_timeout_s", self.settle_timeout_s, ">= 0")
 
 
 @dataclass(frozen=True)
@@ -120,9 +135,16 @@ class EstimatorSettings:
     gate_chi2: float
     reset_after_rejections: int
     max_dt_s: float
+    current_prior_std_mps: float
+    current_walk_mps_per_sqrt_s: float
+    current_max_turn_dps: float
 
     def __post_init__(self) -> None:
-        _positive(self, "estimator", "position_std_m", "velocity_std_mps", "accel_std_mps2", "gate_chi2", "max_dt_s")
+        _positive(self, "estimator", "position_std_m", "velocity_std_mps", "accel_std_mps2", "gate_chi2", "max_dt_s",
+                  "current_prior_std_mps", "current_max_turn_dps")
+        _finite(self, "estimator", "current_walk_mps_per_sqrt_s")
+        _check(self.current_walk_mps_per_sqrt_s >= 0, "estimator.current_walk_mps_per_sqrt_s",
+               self.current_walk_mps_per_sqrt_s, ">= 0")
         _check(self.reset_after_rejections >= 1, "estimator.reset_after_rejections", self.reset_after_rejections,
                ">= 1")
 

@@ -45,7 +45,7 @@ class VehicleView:
     fix_t: float | None = None  # vehicle time of the newest accepted LOCAL_POSITION_NED
     fix_ned: np.ndarray | None = None  # its (N, E) [m]
     global_fix: tuple[float, float, float] | None = None  # (time s, lat deg, lon deg) of GLOBAL_POSITION_INT
-    attitude: tuple[float, float] | None = None  # (time s, heading rad from north) of ATTITUDE
+    attitude: tuple[float, float, float] | None = None  # ATTITUDE: (time s, heading rad from north, yaw rate rad/s)
 
     def link_up(self, now_wall: float, timeout_s: float) -> bool:
         return self.heartbeat_wall is not None and now_wall - self.heartbeat_wall <= timeout_s

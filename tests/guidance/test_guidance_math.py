@@ -49,7 +49,7 @@ def law_for(model: Path, **overrides) -> GuidanceLaw:
 
 def test_paper_speed_rule_maps_the_domain_maximum_to_max_speed_and_never_exceeds_it(zshape_model):
     law = law_for(zshape_model, command={"max_speed_mps": 0.3, "min_speed_mps": 0.0, "turn_slowdown": False,
-                                         "lookahead_m": 0.0})
+                                         "lookahead_m": 0.0}, arrival={"capture_radius_m": 0.0})
     grid = law.sample_grid(64)
     speeds = np.hypot(*np.asarray(grid["velocity_ned"]).T)
     assert speeds.max() == pytest.approx(0.3, rel=0.02)

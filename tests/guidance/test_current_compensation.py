@@ -1,0 +1,125 @@
+"""Current estimation and compensation (pure math): the estimator, the crab, the approach speed cap.
+
+The reference boat model is the one the crab assumes of ArduPilot Rover: it points along the setpoint's
+direction h and holds the ground speed along h at the setpoint's norm; the current's component across h
+sets it sideways. Conventions: NED [m, m/s], headings [rad] from north.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from koopguide.guidance import settings
+from koopguide.guidance.command import CRAB_MIN_SPEED_MPS, GuidanceState, along_current, crab
+from koopguide.guidance.current import CurrentEstimator
+
+from .test_guidance_math import law_for
+
+
+def ground_velocity(setpoint: np.ndarray, current: np.ndarray) -> np.ndarray:
+    """Where a boat that obeys ``setpoint`` goes over ground in ``current`` (no reverse)."""
+    s = float(np.hypot(*setpoint))
+    h = setpoint / s
+    n = np.array([-h[1], h[0]])
+    return s * h + float(current @ n) * n
+
+
+def heading_of(v: np.ndarray) -> float:
+    return math.atan2(v[1], v[0])
+
+
+@pytest.mark.parametrize("current", [(0.03, 0.0), (-0.02, 0.025), (0.0, -0.05)])
+@pytest.mark.parametrize("wanted", [(0.0, 0.3), (0.2, -0.1), (-0.05, 0.04), (0.1, 0.0)])
+def test_crab_makes_good_the_wanted_ground_velocity_when_no_reverse_is_needed(current, wanted):
+    c, v = np.array(current), np.array(wanted)
+    if v @ (v - c) < CRAB_MIN_SPEED_MPS * np.hypot(*(v - c)):  # slower than the current: not this test
+        pytest.skip("needs reverse")
+    setpoint = crab(v, c)
+    np.testing.assert_allclose(ground_velocity(setpoint, c), v, atol=1e-12)
+    assert np.hypot(*setpoint) <= np.hypot(*v) + 1e-12  # never faster than asked over ground
+
+
+def test_crab_at_rest_faces_straight_upstream_and_slower_than_the_current_ferry_glides():
+    c = np.array([0.03, 0.0])  # toward the north
+    hold = crab(np.zeros(2), c)
+    assert abs(heading_of(hold)) == pytest.approx(math.pi) and np.hypot(*hold) == pytest.approx(CRAB_MIN_SPEED_MPS)
+    # a goal a little downstream and to the east: drift toward it, still facing (mostly) upstream
+    setpoint = crab(np.array([0.01, 0.005]), c, math.radians(30))
+    assert np.hypot(*setpoint) == pytest.approx(CRAB_MIN_SPEED_MPS)
+    assert abs(math.pi - abs(heading_of(setpoint))) <= math.radians(30) + 1e-9  # the glide limit
+    drift = ground_velocity(setpoint, c) - setpoint  # what the current does across the heading
+    assert drift[0] > 0 and drift[1] > 0  # downstream and east, toward the goal
+    assert math.cos(heading_of(setpoint)) < 0  # facing into the current
+
+
+def test_the_estimator_learns_a_current_from_sideways_slip_on_changing_headings():
+    est = CurrentEstimator(settings.load().estimator)
+    truth = np.array([0.03, -0.01])
+    rng = np.random.default_rng(1)
+    t = 0.0
+    for k in range(600):  # 30 s at 20 Hz, heading sweeping through a half turn
+        t = k * 0.05
+        psi = math.radians(90 + 6 * t)
+        ground = 0.2 * np.array([math.cos(psi), math.sin(psi)]) + truth + rng.normal(0, 0.01, 2)
+        est.update(t, ground, psi, math.radians(3.0))
+    np.testing.assert_allclose(est.current_ned, truth, atol=0.004)
+    assert est.std_mps < 0.01
+    assert not est.update(t + 0.05, np.array([0.5, 0.5]), 0.0, math.radians(20.0))  # turning hard: skipped
+    assert not est.update(t + 0.1, np.array([np.nan, 0.0]), 0.0, 0.0)  # not finite: skipped
+    np.testing.assert_allclose(est.current_ned, truth, atol=0.004)
+
+
+def test_one_heading_shows_only_the_cross_component_and_the_other_keeps_its_prior():
+    est = CurrentEstimator(settings.load().estimator)
+    for k in range(200):  # heading north, current toward the east: all of it is across
+        est.update(k * 0.05, np.array([0.2, 0.04]), 0.0, 0.0)
+    assert est.current_ned[1] == pytest.approx(0.04, abs=0.003)
+    assert est.current_ned[0] == pytest.approx(0.0, abs=1e-9)  # along the heading: never observed
+    assert est.std_mps == pytest.approx(settings.load().estimator.current_prior_std_mps, rel=0.05)
+
+
+def test_the_approach_slows_a_boat_crossing_the_current_so_it_arrives_facing_into_it(zshape_model):
+    law = law_for(zshape_model)
+    c = np.array([0.03, 0.0])  # toward the north; the goal lies to the east of the boat
+    east = np.array([0.0, 1.0])
+    arrival = law.arrival
+    assert law.approach_cap(arrival.approach_radius_m + 0.1, east, c) == math.inf  # far out: no limit
+    cap = law.approach_cap(arrival.radius_m, east, c)
+    setpoint = crab(east * cap, c)
+    off_upstream = abs(math.pi - abs(heading_of(setpoint)))
+    assert off_upstream == pytest.approx(math.radians(arrival.facing_deg), abs=1e-9)
+    mid = law.approach_cap(0.5 * (arrival.radius_m + arrival.approach_radius_m), east, c)
+    assert cap < mid  # it narrows on the way in
+    assert law.approach_cap(arrival.radius_m, -c / 0.03, c) == math.inf  # heading upstream anyway: no limit
+    assert law.approach_cap(arrival.radius_m, east, np.array([0.001, 0.0])) == math.inf  # no current to speak of
+
+
+def test_decide_with_a_current_crabs_and_keeps_station_facing_it(zshape_model):
+    law = law_for(zshape_model)
+    c = np.array([0.0, -0.03])  # toward the west
+    p = np.array([1.5, -1.5])  # out on the field, far from the goal
+    plain, crabbed = law.decide(p, False), law.decide(p, False, current_ned=c)
+    np.testing.assert_allclose(ground_velocity(crabbed.velocity_ned, c), plain.velocity_ned, atol=1e-12)
+    at_goal = law.decide(np.array([0.01, 0.0]), True, heading_rad=math.pi / 2, current_ned=c)
+    assert at_goal.state is GuidanceState.ARRIVED
+    assert heading_of(at_goal.velocity_ned) == pytest.approx(math.pi / 2, abs=math.radians(25))  # into it: east
+    assert np.hypot(*at_goal.velocity_ned) <= 0.03
+
+
+def test_along_current_accepts_up_and_downstream_within_the_angle():
+    c = np.array([0.03, 0.0])
+    assert along_current(math.pi, c, 15) and along_current(0.1, c, 15)
+    assert not along_current(math.pi / 2, c, 15) and not along_current(math.radians(160), c, 15)
+    assert along_current(math.pi / 2, None, 15) and along_current(math.pi / 2, np.array([0.001, 0.0]), 15)
+
+
+@pytest.mark.parametrize(("key", "value"), [("facing_deg", 0.0), ("facing_deg", 95.0), ("approach_radius_m", 0.1),
+                                            ("capture_radius_m", -1.0), ("settle_radius_m", 0.2)])
+def test_arrival_settings_out_of_range_are_refused(key, value):
+    from koopguide.config import ConfigError
+
+    with pytest.raises(ConfigError, match=f"arrival.{key}"):
+        settings.load(overrides={"arrival": {key: value}})
