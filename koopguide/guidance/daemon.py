@@ -207,13 +207,15 @@ class GuidanceDaemon:
         if self.view.fix_t is not None and t > self.view.fix_t:  # typical interval between fixes
             self.fix_interval += 0.1 * (min(t - self.view.fix_t, 1.0) - self.fix_interval)
         self.view.fix_t, self.view.fix_ned = t, fix[:2]
-        attitude = self.view.attitude
-        if attitude is not None and abs(attitude[0] - t) <= ATTITUDE_PAIR_S:
-            self.current.update(t, self.tracker.kf.x[[1, 3]], attitude[1], attitude[2])
         self._place_geodetic_goal()
         # A fix within half a fix interval of the due time triggers the command (so it goes out at once).
         if self.clock.now() >= self.next_due - min(SLACK * self.period, 0.5 * self.fix_interval):
             self._cycle(arrived)
+        # After the command, off the fix-to-setpoint path (a filterpy update costs ~70 us): the current
+        # changes over tens of seconds, so the command loses nothing by using the estimate one fix old.
+        attitude = self.view.attitude
+        if attitude is not None and abs(attitude[0] - t) <= ATTITUDE_PAIR_S:
+            self.current.update(t, self.tracker.predict(t)[1], attitude[1], attitude[2])
 
     def _place_geodetic_goal(self) -> None:
         """Place a lat/lon goal in local NED once a local and a global fix of about the same moment exist."""
