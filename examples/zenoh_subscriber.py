@@ -16,8 +16,8 @@ from pathlib import Path
 
 import zenoh
 
-from koopguide.guidance.status import StatusFormatError, decode_status
-from koopguide.guidance.zenoh_config import load_zenoh_config
+from koopguide.bus.status import StatusFormatError, decode_status
+from koopguide.bus.zenoh_config import load_zenoh_config
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")

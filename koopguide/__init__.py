@@ -7,8 +7,8 @@ Query side (numpy only)::
     field.velocity([-30.0, 40.0])
 """
 
-from koopguide.field import FlowField, load_field
-from koopguide.modelfile import ModelFileError
+from koopguide.base.modelfile import ModelFileError
+from koopguide.model.field import FlowField, load_field
 
 __all__ = ["FlowField", "ModelFileError", "load_field"]
 __version__ = "0.1.0"

@@ -2,6 +2,6 @@
 
 import sys
 
-from koopguide.cli import main
+from sitl.cli import main
 
-sys.exit(main(["sitl", *sys.argv[1:]]))
+sys.exit(main(sys.argv[1:]))

@@ -15,6 +15,7 @@ import signal
 import sys
 from typing import Any
 
+from koopguide.base.entry import run_entry
 from sitl import config as sitl_config
 from sitl.config import SitlConfig
 from sitl.runner import Simulation
@@ -82,6 +83,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_arguments(parser)
     parser.set_defaults(run=run)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sitl``: the same command as ``koopguide sitl``."""
+    parser = argparse.ArgumentParser(prog="sitl", description="Run the bundled boat simulator.")
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    return run_entry("koopguide", lambda: run(args))
 
 
 def run(args: argparse.Namespace) -> int:

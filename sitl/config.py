@@ -2,7 +2,7 @@
 
 Defaults live only in ``config/sitl.yaml``; these classes carry the types and the units. Build one with
 :func:`load`, which layers the shipped defaults, an optional user file and explicit overrides, and
-rejects unknown or ill-typed keys with :class:`koopguide.config.ConfigError` naming the key.
+rejects unknown or ill-typed keys with :class:`koopguide.base.config.ConfigError` naming the key.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from koopguide import config as config_loader
-from koopguide.config import ConfigError
+from koopguide.base import config as config_loader
+from koopguide.base.config import ConfigError
 
 
 class FlowKind(enum.Enum):

@@ -15,7 +15,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from koopguide.geodesy import geodetic_to_ned
+from koopguide.base.geodesy import geodetic_to_ned
 from sitl.autopilot import (
     MODE_NUMBERS,
     Frame,

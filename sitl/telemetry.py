@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from koopguide.geodesy import ned_to_geodetic
+from koopguide.base.geodesy import ned_to_geodetic
 from sitl.autopilot import AUTOPILOT_MODES, MANUAL_INPUT_MODES
 from sitl.config import OriginConfig, StreamRates
 

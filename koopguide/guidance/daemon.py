@@ -25,16 +25,16 @@ from typing import Any
 
 import numpy as np
 
-from koopguide import config as config_io
-from koopguide.field import load_field
-from koopguide.geodesy import geodetic_to_ned
+from koopguide.base import config as config_io
+from koopguide.base.geodesy import geodetic_to_ned
 from koopguide.guidance import vehicle
-from koopguide.guidance.clock import VehicleClock
-from koopguide.guidance.command import ZERO, GuidanceLaw, GuidanceState, Setpoint, along_current, hold
-from koopguide.guidance.current import CurrentEstimator
+from koopguide.guidance.estimation.clock import VehicleClock
+from koopguide.guidance.estimation.current import CurrentEstimator
+from koopguide.guidance.estimation.tracker import KalmanTracker
+from koopguide.guidance.law.command import ZERO, GuidanceLaw, GuidanceState, Setpoint, along_current, hold
 from koopguide.guidance.link import MavlinkLink
 from koopguide.guidance.settings import ArrivalAction, ExitMode, GuidanceConfig
-from koopguide.guidance.tracker import KalmanTracker
+from koopguide.model.field import load_field
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +109,7 @@ class GuidanceDaemon:
                  law.v_max, cfg.command.max_speed_mps, law.gain)
         daemon.link = await MavlinkLink.create(cfg.mavlink, daemon._on_message)
         if zenoh_config is not None:
-            from koopguide.guidance.status_bus import StatusBus
+            from koopguide.bus.status_bus import StatusBus
 
             daemon.bus = await StatusBus.create(cfg.vehicle_id, zenoh_config, daemon.sample_field,
                                                 daemon.config_snapshot)

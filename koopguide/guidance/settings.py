@@ -2,7 +2,7 @@
 
 Defaults live only in ``config/guidance.yaml``; these classes carry the types, the units (in the field
 names) and the range checks. :func:`load` merges defaults, the user's file and command-line overrides
-and raises :class:`koopguide.config.ConfigError` naming the key for anything unknown, ill-typed or out
+and raises :class:`koopguide.base.config.ConfigError` naming the key for anything unknown, ill-typed or out
 of range - before the service opens any link.
 """
 
@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from koopguide import config
-from koopguide.config import ConfigError
+from koopguide.base import config
+from koopguide.base.config import ConfigError
 
 VEHICLE_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")  # a zenoh key segment: no / * $ # ?
 MAX_RATE_HZ = 50.0

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from koopguide.guidance import settings
-from koopguide.guidance.command import CRAB_MIN_SPEED_MPS, GuidanceState, along_current, crab
-from koopguide.guidance.current import CurrentEstimator
+from koopguide.guidance.estimation.current import CurrentEstimator
+from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceState, along_current, crab
 
 from .test_guidance_math import law_for
 
@@ -119,7 +119,7 @@ def test_along_current_accepts_up_and_downstream_within_the_angle():
 @pytest.mark.parametrize(("key", "value"), [("facing_deg", 0.0), ("facing_deg", 95.0), ("approach_radius_m", 0.1),
                                             ("capture_radius_m", -1.0), ("settle_radius_m", 0.2)])
 def test_arrival_settings_out_of_range_are_refused(key, value):
-    from koopguide.config import ConfigError
+    from koopguide.base.config import ConfigError
 
     with pytest.raises(ConfigError, match=f"arrival.{key}"):
         settings.load(overrides={"arrival": {key: value}})

@@ -8,14 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from koopguide.config import ConfigError
-from koopguide.field import FlowField, load_field
+from koopguide.base.config import ConfigError
 from koopguide.guidance import settings
-from koopguide.guidance.clock import VehicleClock
-from koopguide.guidance.command import GuidanceLaw, GuidanceState
-from koopguide.guidance.frames import ModelFrame
+from koopguide.guidance.estimation.clock import VehicleClock
+from koopguide.guidance.estimation.tracker import KalmanTracker
+from koopguide.guidance.law.command import GuidanceLaw, GuidanceState
+from koopguide.guidance.law.frames import ModelFrame
 from koopguide.guidance.link import Endpoint, EndpointError
-from koopguide.guidance.tracker import KalmanTracker
+from koopguide.model.field import FlowField, load_field
 
 
 def frame(heading: float = 90.0, goal_ned=(0.0, 0.0), scale: float = 0.04) -> ModelFrame:

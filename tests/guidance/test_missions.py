@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 import zenoh
 
-from koopguide.guidance import mission, settings
-from koopguide.guidance.status import STATUS_FIELDS, decode_status
-from koopguide.guidance.zenoh_config import default_zenoh_config
+from koopguide.bus.status import STATUS_FIELDS, decode_status
+from koopguide.bus.zenoh_config import default_zenoh_config
+from koopguide.guidance import settings
+from koopguide.harness import mission
 from sitl import config as sitl_config
 
 from .test_status_bus import free_port

@@ -19,10 +19,10 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from koopguide.guidance.status import encode_status
-from koopguide.guidance.status_bus import StatusBus
-from koopguide.guidance.zenoh_config import DEFAULT_ZENOH_CONFIG_FILE, WELL_KNOWN_PORT, default_zenoh_config
-from koopguide.monitor import Monitor, MonitorState, VehicleView, render_table
+from koopguide.bus.monitor import Monitor, MonitorState, VehicleView, render_table
+from koopguide.bus.status import encode_status
+from koopguide.bus.status_bus import StatusBus
+from koopguide.bus.zenoh_config import DEFAULT_ZENOH_CONFIG_FILE, WELL_KNOWN_PORT, default_zenoh_config
 from tests.guidance.test_status_bus import config_snapshot, field_sampler, free_port, sample_status, wait_for
 
 REPO = Path(__file__).resolve().parents[2]

@@ -17,7 +17,7 @@ import pytest
 
 from koopguide.guidance import settings
 from koopguide.guidance.daemon import GuidanceDaemon
-from koopguide.guidance.mission import free_udp_port
+from koopguide.harness.mission import free_udp_port
 
 from .scripted_vehicle import GUIDED, LOITER, ScriptedVehicle
 

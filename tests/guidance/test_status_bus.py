@@ -19,23 +19,23 @@ from typing import Any
 import pytest
 import zenoh
 
-from koopguide.config import ConfigError
-from koopguide.guidance.status import (
+from koopguide.base.config import ConfigError
+from koopguide.bus.status import (
     STATES,
     STATUS_FIELDS,
     StatusFormatError,
     decode_status,
     encode_status,
 )
-from koopguide.guidance.status_bus import StatusBus
-from koopguide.guidance.zenoh_config import (
+from koopguide.bus.status_bus import StatusBus
+from koopguide.bus.zenoh_config import (
     DEFAULT_ZENOH_CONFIG_FILE,
     WELL_KNOWN_PORT,
     default_zenoh_config,
     load_zenoh_config,
 )
 
-BUS_LOGGER = "koopguide.guidance.status_bus"
+BUS_LOGGER = "koopguide.bus.status_bus"
 
 
 # ---------------------------------------------------------------------------------- helpers

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from koopguide import config, data
-from koopguide.learn import trainer
+from koopguide.base import config, data
+from koopguide.model.learn import trainer
 
 
 def small_config(**overrides) -> trainer.TrainConfig:

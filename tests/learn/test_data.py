@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from koopguide import data
-from koopguide.data import DemoDataError
+from koopguide.base import data
+from koopguide.base.data import DemoDataError
 
 
 def test_all_30_lasa_shapes_load_with_7_demos_ending_at_the_origin():

@@ -8,9 +8,10 @@ import pytest
 import torch
 
 import koopguide
-from koopguide import ModelFileError, modelfile
-from koopguide.commands_learn import save
-from koopguide.learn.model import FourierKoopman
+from koopguide import ModelFileError
+from koopguide.base import modelfile
+from koopguide.model.learn.export import save
+from koopguide.model.learn.model import FourierKoopman
 from tests.learn.conftest import small_config
 
 

@@ -3,8 +3,8 @@ import pytest
 import shapely
 from dtw import dtw as dtw_python
 
-from koopguide import data
-from koopguide.evaluate import convergence_box, dtw_distance, evaluate, swept_error_area
+from koopguide.base import data
+from koopguide.model.evaluate import convergence_box, dtw_distance, evaluate, swept_error_area
 
 
 def test_sea_of_a_unit_square_strip_is_its_area():
@@ -54,7 +54,7 @@ def _shoelace(poly: shapely.Polygon) -> float:
 
 
 def test_eval_numbers_agree_with_independent_implementations(small_trained, zshape):
-    from koopguide.field import FlowField
+    from koopguide.model.field import FlowField
 
     t = small_trained
     field = FlowField(t.W, t.b, t.A, t.B, t.goal, t.goal_centred, t.substeps)

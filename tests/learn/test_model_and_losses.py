@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from koopguide.learn import losses, trainer
-from koopguide.learn.model import FourierKoopman
+from koopguide.model.learn import losses, trainer
+from koopguide.model.learn.model import FourierKoopman
 
 
 def make_model(goal_centred: bool, seed: int = 0, nu: int = 64, rank: int = 8) -> FourierKoopman:

@@ -8,11 +8,11 @@ within 1 unit of the goal for at least 495; the goal an exact fixed point (0.1 a
 
 import pytest
 
-from koopguide import data
-from koopguide.commands_learn import training_config
-from koopguide.evaluate import evaluate
-from koopguide.field import FlowField
-from koopguide.learn import trainer
+from koopguide.base import data
+from koopguide.model.evaluate import evaluate
+from koopguide.model.field import FlowField
+from koopguide.model.learn import trainer
+from koopguide.model.learn.export import training_config
 
 BARS = {  # shape: (max SEA, max DTWD)
     "Zshape": (191.0, 1832.0),

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from koopguide.config import ConfigError
+from koopguide.base.config import ConfigError
 from sitl import config as sitl_config
 
 WALL_LIMIT_S = 60

@@ -9,11 +9,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
 
-from koopguide import config, data, modelfile
-from koopguide.field import FlowField, load_field
+from koopguide.base import data
+from koopguide.model.field import FlowField, load_field
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -49,18 +48,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 # ------------------------------------------------------------------------------------- train
-def training_config(user_file: Path | None, overrides: dict | None = None):
-    from koopguide.learn.trainer import TrainConfig
-
-    return config.build(TrainConfig, config.load_layers("train", user_file, overrides or {}))
-
-
 def demos_from(lasa: str | None, path: str | Path | None) -> data.Demonstrations:
     return data.load_lasa(lasa) if lasa else data.load_demos(path)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from koopguide.learn import trainer
+    from koopguide.model.learn import trainer
+    from koopguide.model.learn.export import save, training_config
 
     cfg = training_config(args.config)
     demos = demos_from(args.lasa, args.demos)
@@ -81,25 +75,6 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def save(path: Path, trained, demos: data.Demonstrations, cfg) -> None:
-    lo, hi = demos.bounds
-    meta = {
-        "dim": demos.dim,
-        "goal": trained.goal.tolist(),
-        "substeps": trained.substeps,
-        "goal_centred": trained.goal_centred,
-        "nu": int(trained.W.shape[0]),
-        "rank": int(trained.A.shape[1]),
-        "bounds_lo": lo.tolist(),
-        "bounds_hi": hi.tolist(),
-        "hyperparameters": config.to_plain(cfg),
-        "data": demos.summary(),
-        "train": trained.info,
-        "created_unix": time.time(),
-    }
-    modelfile.write(path, {"W": trained.W, "b": trained.b, "A": trained.A, "B": trained.B}, meta)
-
-
 # -------------------------------------------------------------------------------------- eval
 def training_demos(field: FlowField, override: str | None) -> data.Demonstrations:
     """The demonstrations to compare with: ``override``, else the model's own training data."""
@@ -117,7 +92,7 @@ def training_demos(field: FlowField, override: str | None) -> data.Demonstration
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    from koopguide.evaluate import evaluate
+    from koopguide.model.evaluate import evaluate
 
     field = load_field(args.model)
     demos = training_demos(field, args.demos)
@@ -146,7 +121,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 # -------------------------------------------------------------------------------------- plot
 def cmd_plot(args: argparse.Namespace) -> int:
-    from koopguide.plot import plot_field
+    from koopguide.model.plot import plot_field
 
     field = load_field(args.model)
     demos = training_demos(field, args.demos)
@@ -166,10 +141,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
         return sitl_bench.main(args.rest)
     if args.what == "guidance":
-        from koopguide.guidance import bench as guidance_bench
+        from koopguide.harness import guidance_bench
 
         return guidance_bench.main(args.rest)
-    from koopguide.bench import main as bench_main
+    from koopguide.harness.learn_bench import main as bench_main
 
     return bench_main(args.rest)
 

@@ -7,7 +7,7 @@ processes on one host find each other with no flags. A process that cannot bind 
 one holds it) still starts and connects to it; connections are retried in the background.
 
 ``--zenoh-config FILE`` replaces the default entirely (no merging): the file is the whole
-configuration. Errors are :class:`koopguide.config.ConfigError` with one line naming the file.
+configuration. Errors are :class:`koopguide.base.config.ConfigError` with one line naming the file.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import zenoh
 
-from koopguide.config import CONFIG_DIR, ConfigError, read_config_text
+from koopguide.base.config import CONFIG_DIR, ConfigError, read_config_text
 
 #: The shipped default configuration.
 DEFAULT_ZENOH_CONFIG_FILE = CONFIG_DIR / "zenoh.json5"

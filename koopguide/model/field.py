@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from koopguide import modelfile
+from koopguide.base import modelfile
 
 
 class FlowField:

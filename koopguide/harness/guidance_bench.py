@@ -106,10 +106,10 @@ class Scenario:
 
 
 def scenario(model: Path, rate_hz: float, seconds: float) -> Scenario:
-    from koopguide import data
-    from koopguide.field import load_field
-    from koopguide.guidance.frames import ModelFrame
-    from koopguide.guidance.mission import demo_start_pose, free_udp_port, sim_overrides, tank_around
+    from koopguide.base import data
+    from koopguide.guidance.law.frames import ModelFrame
+    from koopguide.harness.mission import demo_start_pose, free_udp_port, sim_overrides, tank_around
+    from koopguide.model.field import load_field
 
     field = load_field(model)
     source = field.meta.get("data", {}).get("source")
@@ -139,8 +139,8 @@ def scenario(model: Path, rate_hz: float, seconds: float) -> Scenario:
 # ------------------------------------------------------------------------------------------ measurement
 async def measure_rate(model: Path, rate_hz: float, seconds: float) -> RateFigures:
     """Start the simulator and the daemon, warm up to guiding, measure one window, stop both."""
-    from koopguide.guidance.command import GuidanceState
     from koopguide.guidance.daemon import GuidanceDaemon
+    from koopguide.guidance.law.command import GuidanceState
     from sitl.process import SimulatorProcess
 
     setup = scenario(model, rate_hz, seconds)

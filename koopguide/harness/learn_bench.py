@@ -52,9 +52,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
 
-    from koopguide import data
-    from koopguide.commands_learn import save, training_config
-    from koopguide.learn import trainer
+    from koopguide.base import data
+    from koopguide.model.learn import trainer
+    from koopguide.model.learn.export import save, training_config
 
     cfg = training_config(None)
     demos = data.load_lasa(args.lasa)

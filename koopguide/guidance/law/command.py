@@ -27,8 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from koopguide.field import FlowField
-from koopguide.guidance.frames import ModelFrame
+from koopguide.guidance.law.frames import ModelFrame
 from koopguide.guidance.settings import (
     ArrivalSettings,
     CommandSettings,
@@ -36,6 +35,7 @@ from koopguide.guidance.settings import (
     GuidanceConfig,
     OutsideDomain,
 )
+from koopguide.model.field import FlowField
 
 
 class GuidanceState(enum.Enum):

@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from koopguide.field import FlowField
-from koopguide.guidance.command import GuidanceLaw
-from koopguide.guidance.frames import ModelFrame
+from koopguide.guidance.law.command import GuidanceLaw
+from koopguide.guidance.law.frames import ModelFrame
 from koopguide.guidance.settings import GuidanceConfig
+from koopguide.model.field import FlowField
 
 TANK_M = (4.5, 3.0)  # the paper's tank, N x E [m]
 DEMO_SETTLE_S = 20.0  # simulated seconds the demo keeps watching after arrival
@@ -140,9 +140,9 @@ def demo_mission(model: Path, start_index: int, current_mps: float, speedup: flo
                  seed: int = 0) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
     """The README's mission: a Zshape demo start, goal at NED (0, 0), 0.04 m per unit, model +x East,
     0.3 m/s top speed, in a uniform current toward the north (across the field's final leg)."""
-    from koopguide import data
-    from koopguide.field import load_field
+    from koopguide.base import data
     from koopguide.guidance import settings
+    from koopguide.model.field import load_field
     from sitl import config as sitl_config
 
     port = free_udp_port()
@@ -168,9 +168,10 @@ def run_demo(args: Any) -> int:
     """``koopguide demo``: train Zshape if no cached model, fly the mission in the simulator, plot it."""
     import logging
 
-    from koopguide import cli
-    from koopguide.guidance.mission_plot import plot_mission
-    from koopguide.guidance.zenoh_config import load_zenoh_config
+    from koopguide.base import data
+    from koopguide.bus.zenoh_config import load_zenoh_config
+    from koopguide.harness.mission_plot import plot_mission
+    from koopguide.model.learn.export import train_to_file
     from sitl.flow import Flow
 
     if args.speedup <= 0:
@@ -181,9 +182,7 @@ def run_demo(args: Any) -> int:
     model = args.out / "zshape.pt"
     if not model.is_file():
         print(f"koopguide demo: no cached model; training Zshape into {model}", file=sys.stderr)
-        code = cli.main(["train", "--lasa", "Zshape", "-o", str(model), "--seed", "0", "--quiet"])
-        if code:
-            return code
+        train_to_file(data.load_lasa("Zshape"), model, seed=0)
     cfg, sim_cfg, pose = demo_mission(model, args.start, args.current_mps, args.speedup)
     print(f"koopguide demo: boat at N {pose[0]:.2f} E {pose[1]:.2f} m heading {pose[2]:.0f} deg, goal N 0 E 0, "
           f"current {args.current_mps:.2f} m/s toward north, simulator x{args.speedup:g}; "

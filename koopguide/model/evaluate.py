@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from koopguide.data import Demonstrations
-from koopguide.field import FlowField
+from koopguide.base.data import Demonstrations
+from koopguide.model.field import FlowField
 
 
 def swept_error_area(demo: np.ndarray, rep: np.ndarray) -> float:

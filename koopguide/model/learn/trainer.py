@@ -1,6 +1,6 @@
 """Training a KoopMotion flow field: typed settings, the optimisation loop, and the trained result.
 
-Array conventions: demonstrations as in :mod:`koopguide.data` (``(T, d)`` per trajectory); the
+Array conventions: demonstrations as in :mod:`koopguide.base.data` (``(T, d)`` per trajectory); the
 trained weights come out as float64 numpy arrays ``W (nu, d)``, ``b (nu,)``, ``A, B (nu + d, r)``.
 """
 
@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from koopguide import data as demo_data
-from koopguide.learn.losses import (
+from koopguide.base import data as demo_data
+from koopguide.model.learn.losses import (
     DivergenceOf,
     divergence_loss,
     goal_loss,
@@ -24,7 +24,7 @@ from koopguide.learn.losses import (
     multistep_loss,
     pair_losses,
 )
-from koopguide.learn.model import FourierKoopman
+from koopguide.model.learn.model import FourierKoopman
 
 
 class LRSchedule(enum.Enum):

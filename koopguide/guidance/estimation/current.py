@@ -8,7 +8,7 @@ the component of its ground velocity across its heading is the current's compone
 One heading shows one component of the current; as the heading changes along a route both become
 observable. The component along the heading cannot be told from the boat's own speed through the water,
 and does not need to be: the autopilot holds the speed over ground along the heading (see
-:func:`koopguide.guidance.command.crab`).
+:func:`koopguide.guidance.law.command.crab`).
 
 Model: state ``c = (c_N, c_E)`` [m/s], a random walk (a current changes slowly along the route);
 prior ``c = 0`` with ``current_prior_std_mps``; measurement ``z = v_ground . n(psi)`` with ``H = n(psi)^T``

@@ -24,8 +24,9 @@ import yaml
 
 T = TypeVar("T")
 
-#: The shipped defaults, one YAML file per entry point (train, sitl, guidance).
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
+#: The shipped defaults, one YAML file per entry point (train, sitl, guidance), installed with the package
+#: (``koopguide/defaults``; the checkout's top-level ``config/`` is a link to it).
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "defaults"
 
 
 class ConfigError(ValueError):
@@ -36,7 +37,7 @@ def default_config_path(name: str) -> Path:
     """Path of the shipped default configuration ``config/<name>.yaml``."""
     path = CONFIG_DIR / f"{name}.yaml"
     if not path.is_file():
-        raise ConfigError(f"default configuration {path} is missing (koopguide runs from a source checkout)")
+        raise ConfigError(f"default configuration {path} is missing (a broken installation: reinstall koopguide)")
     return path
 
 

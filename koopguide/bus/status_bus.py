@@ -31,12 +31,12 @@ from typing import Any
 
 import zenoh
 
-from koopguide.guidance.status import encode_status, validate_vehicle_id
-from koopguide.guidance.zenoh_config import load_zenoh_config, zenoh_error_text
+from koopguide.bus.status import encode_status, validate_vehicle_id
+from koopguide.bus.zenoh_config import load_zenoh_config, zenoh_error_text
 
 __all__ = ["QUERY_POLL_S", "StatusBus", "StatusKeys", "load_zenoh_config"]
 
-logger = logging.getLogger("koopguide.guidance.status_bus")
+logger = logging.getLogger("koopguide.bus.status_bus")
 
 #: Key prefix of everything koopguide publishes.
 APP = "koopguide"

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 if TYPE_CHECKING:
-    from koopguide.monitor import Monitor
+    from koopguide.bus.monitor import Monitor
 
 #: Seconds between two tables.
 REFRESH_S = 0.5
@@ -43,8 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_monitor(args: argparse.Namespace) -> int:
-    from koopguide.guidance.zenoh_config import load_zenoh_config
-    from koopguide.monitor import Monitor
+    from koopguide.bus.monitor import Monitor
+    from koopguide.bus.zenoh_config import load_zenoh_config
 
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be a positive number of seconds, got {args.duration:g}")

@@ -20,9 +20,9 @@ from typing import Any
 
 import zenoh
 
-from koopguide.config import ConfigError
-from koopguide.guidance.status import StatusFormatError, decode_status
-from koopguide.guidance.zenoh_config import zenoh_error_text
+from koopguide.base.config import ConfigError
+from koopguide.bus.status import StatusFormatError, decode_status
+from koopguide.bus.zenoh_config import zenoh_error_text
 
 STATUS_KEYS = "koopguide/*/status"
 ALIVE_KEYS = "koopguide/*/alive"

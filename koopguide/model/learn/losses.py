@@ -1,6 +1,6 @@
 """KoopMotion's training losses (all mean squared errors).
 
-Array conventions as in :mod:`koopguide.learn.model`: states ``(N, d)``, windows ``(M, H + 1, d)``.
+Array conventions as in :mod:`koopguide.model.learn.model`: states ``(N, d)``, windows ``(M, H + 1, d)``.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import enum
 
 import torch
 
-from koopguide.learn.model import FourierKoopman
+from koopguide.model.learn.model import FourierKoopman
 
 
 class DivergenceOf(enum.Enum):

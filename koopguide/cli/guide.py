@@ -13,7 +13,7 @@ import signal
 from pathlib import Path
 from typing import Any
 
-from koopguide.config import ConfigError
+from koopguide.base.config import ConfigError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -89,9 +89,9 @@ def setup_logging(verbose: bool) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from koopguide.bus.zenoh_config import load_zenoh_config
     from koopguide.guidance import settings
     from koopguide.guidance.link import Endpoint
-    from koopguide.guidance.zenoh_config import load_zenoh_config
 
     cfg = settings.load(args.config, overrides_from(args))
     Endpoint.parse(cfg.mavlink.endpoint)  # a bad endpoint is refused with the config's other errors
@@ -119,6 +119,6 @@ async def serve(cfg: Any, model: Path, zenoh_config: Any) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from koopguide.guidance.mission import run_demo
+    from koopguide.harness.mission import run_demo
 
     return run_demo(args)

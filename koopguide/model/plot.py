@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from koopguide.data import Demonstrations
-from koopguide.evaluate import convergence_box, reproduce
-from koopguide.field import FlowField
+from koopguide.base.data import Demonstrations
+from koopguide.model.evaluate import convergence_box, reproduce
+from koopguide.model.field import FlowField
 
 
 def plot_field(field: FlowField, demos: Demonstrations, output: Path, title: str = "", grid_starts: int = 6) -> None:
