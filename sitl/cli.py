@@ -16,6 +16,7 @@ import sys
 from typing import Any
 
 from koopguide.base.entry import run_entry
+from koopguide.base.flags import Flag, add_flags, name_list, overrides_from
 from sitl import config as sitl_config
 from sitl.config import SitlConfig
 from sitl.runner import Simulation
@@ -34,44 +35,29 @@ def speedup_value(text: str) -> float:
     return value
 
 
+#: Flags of ``koopguide sitl`` that set keys of config/sitl.yaml.
+SITL_FLAGS: tuple[Flag, ...] = (
+    Flag("--mavlink", "mavlink.endpoints", str, "udpout:HOST:PORT, udpin:HOST:PORT, tcpin:HOST:PORT or "
+         "tcp:HOST:PORT; repeatable (default udpout:127.0.0.1:14550)", metavar="ENDPOINT", repeat=True),
+    Flag("--speedup", "speedup", speedup_value, "simulated s per wall s, or 'max'", metavar="X"),
+    Flag("--flow", "flow.kinds", name_list, "none, uniform, vortex, double_gyre, gusts; comma-separated to sum",
+         metavar="KIND"),
+    Flag("--count", "count", int, "number of boats (system ids 1..N)", metavar="N"),
+    Flag("--seed", "seed", int, "random seed for flow and sensor noise", metavar="N"),
+    Flag("--duration", "duration_s", float, "stop after S simulated seconds", metavar="S"),
+    Flag("--record", "recorder.path", str, "write ground truth as JSON lines to FILE", metavar="FILE"),
+)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", metavar="FILE", help="YAML file overriding config/sitl.yaml")
-    parser.add_argument(
-        "--mavlink",
-        metavar="ENDPOINT",
-        action="append",
-        help="udpout:HOST:PORT, udpin:HOST:PORT, tcpin:HOST:PORT or tcp:HOST:PORT; repeatable "
-        "(default udpout:127.0.0.1:14550)",
-    )
-    parser.add_argument("--speedup", metavar="X", type=speedup_value, help="simulated s per wall s, or 'max'")
-    parser.add_argument(
-        "--flow", metavar="KIND", help="none, uniform, vortex, double_gyre, gusts; comma-separated to sum"
-    )
-    parser.add_argument("--count", metavar="N", type=int, help="number of boats (system ids 1..N)")
-    parser.add_argument("--seed", metavar="N", type=int, help="random seed for flow and sensor noise")
-    parser.add_argument("--duration", metavar="S", type=float, help="stop after S simulated seconds")
-    parser.add_argument("--record", metavar="FILE", help="write ground truth as JSON lines to FILE")
+    add_flags(parser, SITL_FLAGS)
     parser.add_argument("--quiet", action="store_true", help="log warnings only")
 
 
 def overrides(args: argparse.Namespace) -> dict[str, Any]:
     """Config overrides from the flags that were given."""
-    out: dict[str, Any] = {}
-    if args.mavlink:
-        out["mavlink"] = {"endpoints": list(args.mavlink)}
-    if args.speedup is not None:
-        out["speedup"] = args.speedup
-    if args.flow is not None:
-        out["flow"] = {"kinds": [k.strip() for k in args.flow.split(",") if k.strip()]}
-    if args.count is not None:
-        out["count"] = args.count
-    if args.seed is not None:
-        out["seed"] = args.seed
-    if args.duration is not None:
-        out["duration_s"] = args.duration
-    if args.record is not None:
-        out["recorder"] = {"path": args.record}
-    return out
+    return overrides_from(args, SITL_FLAGS)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

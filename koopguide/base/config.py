@@ -7,18 +7,24 @@ keys and ill-typed values with a :class:`ConfigError` that names the key path an
 
 Supported field types: ``bool``, ``int``, ``float`` (an int is accepted), ``str``, ``pathlib.Path``,
 ``enum.Enum`` subclasses (by value), ``tuple[T, ...]``, ``tuple[T1, T2]``, ``X | None`` and nested
-dataclasses.
+dataclasses. Every numeric key declares its interval once, in its type: ``Annotated[float, Range(0, 50,
+lo_open=True)]``; :func:`build` checks it (and finiteness) while loading, so a dataclass only checks
+relations between keys in ``__post_init__`` (with :func:`check`). YAML numbers are read the YAML 1.2
+way: ``1e7`` and ``1.0e300`` are numbers, not strings.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import enum
+import math
+import re
 import types
 import typing
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
 import yaml
 
@@ -31,6 +37,62 @@ CONFIG_DIR = Path(__file__).resolve().parent.parent / "defaults"
 
 class ConfigError(ValueError):
     """A configuration file or value is unusable; the message names the key and the value seen."""
+
+
+@dataclass(frozen=True)
+class Range:
+    """The interval a numeric key must lie in (closed ends unless ``*_open``); NaN and infinity never do."""
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def contains(self, value: float) -> bool:
+        if not math.isfinite(value):
+            return False
+        above = value > self.lo if self.lo_open else value >= self.lo
+        below = value < self.hi if self.hi_open else value <= self.hi
+        return above and below
+
+    def __str__(self) -> str:
+        if self.lo == -math.inf and self.hi == math.inf:
+            return "a finite number"
+        if self.hi == math.inf:
+            return f"a finite number {'>' if self.lo_open else '>='} {self.lo:g}"
+        if self.lo == -math.inf:
+            return f"a finite number {'<' if self.hi_open else '<='} {self.hi:g}"
+        left, right = "(" if self.lo_open else "[", ")" if self.hi_open else "]"
+        return f"a number in {left}{self.lo:g}, {self.hi:g}{right}"
+
+
+#: Common intervals.
+POSITIVE = Range(0.0, lo_open=True)
+NON_NEGATIVE = Range(0.0)
+FINITE = Range()
+#: Shorthands for the common numeric key types.
+PositiveFloat = Annotated[float, POSITIVE]
+NonNegativeFloat = Annotated[float, NON_NEGATIVE]
+FiniteFloat = Annotated[float, FINITE]
+
+
+def check(ok: bool, key: str, value: Any, expected: str) -> None:
+    """Raise a ConfigError naming ``key``, the value seen and what was expected, unless ``ok``."""
+    if not ok:
+        raise ConfigError(f"{key}: {value!r} is out of range (expected {expected})")
+
+
+class _Yaml12Loader(yaml.SafeLoader):
+    """PyYAML's safe loader, reading floats as YAML 1.2 does (``1e7``, ``1.0e300``; PyYAML wants a dot and a
+    signed exponent and would otherwise return such numbers as strings)."""
+
+
+_Yaml12Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^(?:[-+]?(?:[0-9][0-9_]*\.[0-9_]*|\.[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)?|[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+"
+               r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"),
+    list("-+0123456789."),
+)
 
 
 def default_config_path(name: str) -> Path:
@@ -56,7 +118,7 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     text = read_config_text(path)
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_Yaml12Loader)
     except yaml.YAMLError as exc:
         where = getattr(exc, "problem_mark", None)
         at = f" at line {where.line + 1}" if where is not None else ""
@@ -91,7 +153,7 @@ def build(cls: type[T], data: Any, where: str = "") -> T:
     """Build dataclass ``cls`` from mapping ``data``; every key must be known and well typed."""
     if not isinstance(data, Mapping):
         raise ConfigError(f"{where or 'configuration'}: expected a mapping, got {_seen(data)}")
-    hints = typing.get_type_hints(cls)
+    hints = typing.get_type_hints(cls, include_extras=True)
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     unknown = sorted(set(map(str, data)) - set(fields))
     if unknown:
@@ -121,6 +183,35 @@ def to_plain(obj: Any) -> Any:
     return obj
 
 
+def numeric_without_range(cls: type) -> list[str]:
+    """Keys of dataclass ``cls`` (recursively) whose numbers have no :class:`Range`: each should have one."""
+    missing = []
+    for name, tp in typing.get_type_hints(cls, include_extras=True).items():
+        missing += [f"{name}{sub}" for sub in _unranged(tp)]
+    return missing
+
+
+def _unranged(tp: Any) -> list[str]:
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is Annotated:
+        return [] if any(isinstance(m, Range) for m in tp.__metadata__) else _unranged(args[0])
+    if tp in (int, float):
+        return [""]
+    if dataclasses.is_dataclass(tp):
+        return [f".{key}" for key in numeric_without_range(tp)]
+    if origin in (typing.Union, types.UnionType, tuple):
+        return sorted({sub for a in args if a is not Ellipsis for sub in _unranged(a)})
+    return []
+
+
+def _check_range(interval: Range, value: Any, key: str) -> None:
+    if isinstance(value, tuple):
+        for i, item in enumerate(value):
+            _check_range(interval, item, f"{key}[{i}]")
+    elif isinstance(value, int | float) and not isinstance(value, bool) and not interval.contains(value):
+        raise ConfigError(f"{key}: {value!r} is out of range (expected {interval})")
+
+
 def _join(where: str, key: str) -> str:
     return f"{where}.{key}" if where else key
 
@@ -132,6 +223,11 @@ def _seen(value: Any) -> str:
 def _convert(tp: Any, value: Any, key: str) -> Any:
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
+    if origin is Annotated:
+        converted = _convert(args[0], value, key)
+        for interval in (m for m in tp.__metadata__ if isinstance(m, Range)):
+            _check_range(interval, converted, key)
+        return converted
     if origin in (typing.Union, types.UnionType):
         if value is None and type(None) in args:
             return None

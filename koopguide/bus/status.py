@@ -1,61 +1,30 @@
-"""The status a guidance daemon publishes on zenoh key ``koopguide/<vehicle-id>/status`` (pure, no I/O).
+"""The status a guidance service publishes on zenoh key ``koopguide/<vehicle-id>/status`` (pure, no I/O).
 
-One status is one compact JSON object (UTF-8). Frames and units: positions are local NED metres
-``[N, E]``, velocities NED metres per second ``[vN, vE]``; every number is finite (NaN and infinity are
-refused, JSON has no spelling for them). Required keys, in publication order:
+The one source of the status fields is the :class:`Status` dataclass below: its fields, in publication
+order, with their types, units and meanings (the field ``metadata``). The service builds a ``Status``;
+:func:`encode_status` serialises it (or a mapping with the same keys) after checking it; subscribers
+(``koopguide monitor``, the dashboard, your own) parse with :func:`decode_status`; the table in
+docs/zenoh.md is generated from it (``python -m koopguide.bus.status``) and checked by a test.
 
-``t``                  float   unix wall time of publication [s]
-``seq``                int     publication counter of this daemon, from 1, +1 per status
-``vehicle_id``         str     the vehicle's id, also the key segment: 1-64 of ``A-Z a-z 0-9 _ -``
-``state``              str     one of :data:`STATES`: idle, waiting, guiding, arrived, hold, fault
-``mode``               str | None   the autopilot's flight mode, e.g. ``"GUIDED"``; None before a heartbeat
-``armed``              bool | None  the autopilot's armed flag; None before a heartbeat
-``position_ned``       [N, E] | None    estimated position [m]; None before the first fix
-``velocity_ned``       [vN, vE] | None  estimated velocity [m/s]
-``goal_ned``           [N, E] | None    where the model's goal lands [m]
-``distance_to_goal_m`` float | None     |position - goal| [m], >= 0
-``cmd_velocity_ned``   [vN, vE]         the velocity setpoint last sent [m/s] (zeros when holding)
-``speed_limit_mps``    float            the largest commanded speed allowed [m/s], >= 0
-``position_age_s``     float | None     age of the newest position the estimate rests on [s]
-``loop_latency_ms``    {"p50": float | None, "p99": float | None}  guidance loop latency percentiles [ms]
-``model``              str              the model file the daemon guides with
-
-Any other key is an optional extra (the daemon sends ``vehicle_time_s``, ``reason``
-and ``link``): it is passed through unchanged and only has to be finite JSON.
-
-:func:`encode_status` validates then serialises; :func:`decode_status` parses then validates. Both raise
-:class:`StatusFormatError` naming the offending key and the value seen.
+One status is one compact JSON object (UTF-8). Positions are local NED metres ``[N, E]``, velocities
+NED metres per second ``[vN, vE]``; every number is finite (JSON has no spelling for NaN or infinity).
+Any key beyond the fields is an optional extra (``Status.extras``): passed through unchanged, it only has
+to be finite JSON. Errors are :class:`StatusFormatError`, naming the key and the value seen.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
+import sys
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
-#: The daemon's states, as published in ``state``.
+#: The service's states, as published in ``state``.
 STATES: tuple[str, ...] = ("idle", "waiting", "guiding", "arrived", "hold", "fault")
-
-#: Every status carries these keys (see the module docstring for types and units).
-STATUS_FIELDS: tuple[str, ...] = (
-    "t",
-    "seq",
-    "vehicle_id",
-    "state",
-    "mode",
-    "armed",
-    "position_ned",
-    "velocity_ned",
-    "goal_ned",
-    "distance_to_goal_m",
-    "cmd_velocity_ned",
-    "speed_limit_mps",
-    "position_age_s",
-    "loop_latency_ms",
-    "model",
-)
 
 #: A vehicle id is one zenoh key segment: no ``/ * $ # ?`` and nothing that needs escaping.
 VEHICLE_ID_PATTERN = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
@@ -75,8 +44,10 @@ def validate_vehicle_id(vehicle_id: object) -> str:
     return vehicle_id
 
 
-def encode_status(status: Mapping[str, Any]) -> bytes:
+def encode_status(status: Status | Mapping[str, Any]) -> bytes:
     """Validate ``status`` and serialise it as compact UTF-8 JSON."""
+    if isinstance(status, Status):
+        status = status.to_dict()
     validate_status(status)
     try:
         text = json.dumps(dict(status), separators=(",", ":"), allow_nan=False)
@@ -98,12 +69,14 @@ def decode_status(payload: bytes | bytearray | memoryview) -> dict[str, Any]:
     if not isinstance(status, dict):
         raise StatusFormatError(f"status payload must be a JSON object, got {type(status).__name__}: {_preview(text)}")
     validate_status(status)
-    for key in ("t", "distance_to_goal_m", "speed_limit_mps", "position_age_s"):
-        if status[key] is not None:
-            status[key] = float(status[key])
-    for key in ("position_ned", "velocity_ned", "goal_ned", "cmd_velocity_ned"):
-        if status[key] is not None:
-            status[key] = [float(v) for v in status[key]]
+    for f in _FIELDS:  # numbers of the float keys come back as floats, whatever JSON spelling they had
+        value, kind = status[f.name], f.metadata["kind"]
+        if value is None:
+            continue
+        if kind.startswith("float"):
+            status[f.name] = float(value)
+        elif kind.startswith("["):
+            status[f.name] = [float(v) for v in value]
     status["loop_latency_ms"] = {
         k: (None if v is None else float(v)) if k in ("p50", "p99") else v for k, v in status["loop_latency_ms"].items()
     }
@@ -204,24 +177,67 @@ def _latency(key: str, value: Any) -> None:
             _number(f"{key}.{part}", value[part], minimum=0.0)
 
 
-_CHECKS: dict[str, Callable[[str, Any], None]] = {
-    "t": _float,
-    "seq": _seq,
-    "vehicle_id": _vehicle_id,
-    "state": _state,
-    "mode": _optional(_string),
-    "armed": _optional(_bool),
-    "position_ned": _optional(_pair),
-    "velocity_ned": _optional(_pair),
-    "goal_ned": _optional(_pair),
-    "distance_to_goal_m": _optional(_non_negative),
-    "cmd_velocity_ned": _pair,
-    "speed_limit_mps": _non_negative,
-    "position_age_s": _optional(_float),
-    "loop_latency_ms": _latency,
-    "model": _string,
-}
-assert tuple(_CHECKS) == STATUS_FIELDS  # one check per documented key, in the documented order
+def _spec(kind: str, unit: str, doc: str, check: Callable[[str, Any], None]) -> dict[str, Any]:
+    return {"kind": kind, "unit": unit, "doc": doc, "check": check}
+
+
+@dataclass(frozen=True)
+class Status:
+    """One status, the fields in publication order (``metadata``: JSON type, unit, meaning, check)."""
+
+    t: float = field(metadata=_spec("float", "s", "Unix wall time of publication", _float))
+    seq: int = field(metadata=_spec("int", "", "publication counter of this service, from 1, +1 per status", _seq))
+    vehicle_id: str = field(metadata=_spec("str", "", "the vehicle id, also the key segment: 1-64 of "
+                                           "`A-Z a-z 0-9 _ -`", _vehicle_id))
+    state: str = field(metadata=_spec("str", "", "`idle`, `waiting`, `guiding`, `arrived`, `hold` or `fault` "
+                                      "([guidance.md](guidance.md), \"States\")", _state))
+    reason: str | None = field(metadata=_spec("str or null", "", "why the service is in this state, one line "
+                                              "(the same text as in its log)", _optional(_string)))
+    degraded: bool = field(metadata=_spec("bool", "", "guiding with a fallback strategy (e.g. direct pursuit "
+                                          "after the progress watchdog fired); `reason` says why", _bool))
+    mode: str | None = field(metadata=_spec("str or null", "", "the autopilot's mode name, e.g. `\"GUIDED\"` "
+                                            "(`\"MODE_9\"` for a number not in the Rover table); null before a "
+                                            "heartbeat", _optional(_string)))
+    armed: bool | None = field(metadata=_spec("bool or null", "", "the autopilot's armed flag; null before a "
+                                              "heartbeat", _optional(_bool)))
+    position_ned: list[float] | None = field(metadata=_spec("[N, E] or null", "m", "the estimated position; "
+                                                            "null before the first fix", _optional(_pair)))
+    velocity_ned: list[float] | None = field(metadata=_spec("[vN, vE] or null", "m/s", "the estimated velocity",
+                                                            _optional(_pair)))
+    goal_ned: list[float] | None = field(metadata=_spec("[N, E] or null", "m", "where the model's goal lands; "
+                                                        "null until a geodetic goal is placed", _optional(_pair)))
+    distance_to_goal_m: float | None = field(metadata=_spec("float >= 0 or null", "m", "distance from "
+                                                            "`position_ned` to the goal", _optional(_non_negative)))
+    cmd_velocity_ned: list[float] = field(metadata=_spec("[vN, vE]", "m/s", "the velocity setpoint last sent "
+                                                         "(zeros when holding)", _pair))
+    speed_limit_mps: float = field(metadata=_spec("float >= 0", "m/s", "`command.max_speed_mps`, the largest "
+                                                  "speed ever commanded", _non_negative))
+    position_age_s: float | None = field(metadata=_spec("float or null", "s", "vehicle time since the newest "
+                                                        "accepted position fix", _optional(_float)))
+    loop_latency_ms: dict[str, float | None] = field(metadata=_spec("`{\"p50\", \"p99\"}`", "ms", "percentiles "
+                                                                    "of the fix-to-setpoint latency; null before "
+                                                                    "any", _latency))
+    model: str = field(metadata=_spec("str", "", "the model file, as given to `--model`", _string))
+    extras: dict[str, Any] = field(default_factory=dict, metadata={"extra": True})
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object: the fields in order, then the extras."""
+        out = {f.name: getattr(self, f.name) for f in _FIELDS}
+        out.update(self.extras)
+        return out
+
+
+_FIELDS: tuple[dataclasses.Field, ...] = tuple(f for f in dataclasses.fields(Status) if not f.metadata.get("extra"))
+#: Every status carries these keys, in this order.
+STATUS_FIELDS: tuple[str, ...] = tuple(f.name for f in _FIELDS)
+_CHECKS: dict[str, Callable[[str, Any], None]] = {f.name: f.metadata["check"] for f in _FIELDS}
+
+
+def markdown_table() -> str:
+    """The fields as the markdown table of docs/zenoh.md."""
+    rows = ["| key | type | unit | meaning |", "| --- | --- | --- | --- |"]
+    rows += [f"| `{f.name}` | {f.metadata['kind']} | {f.metadata['unit']} | {f.metadata['doc']} |" for f in _FIELDS]
+    return "\n".join(rows)
 
 
 def _refuse_constant(name: str) -> None:
@@ -242,3 +258,7 @@ def _offending_extra(status: Mapping[str, Any]) -> str:
 
 def _preview(text: str) -> str:
     return repr(text if len(text) <= 60 else text[:57] + "...")
+
+
+if __name__ == "__main__":  # python -m koopguide.bus.status: the table for docs/zenoh.md
+    sys.stdout.write(markdown_table() + "\n")

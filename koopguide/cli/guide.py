@@ -14,13 +14,29 @@ from pathlib import Path
 from typing import Any
 
 from koopguide.base.config import ConfigError
+from koopguide.base.flags import Flag, add_flags, number_pair, overrides_from
+
+#: Flags of ``koopguide run`` that set keys of config/guidance.yaml.
+GUIDANCE_FLAGS: tuple[Flag, ...] = (
+    Flag("--mavlink", "mavlink.endpoint", str, "udp:HOST:PORT (listen), udpout:, tcp:, tcpin: or DEVICE,BAUD",
+         metavar="ENDPOINT"),
+    Flag("--vehicle-id", "vehicle_id", str, "name on zenoh: koopguide/<id>/status"),
+    Flag("--goal-ned", "frame.goal_ned", number_pair, "where the model's goal lands in local NED [m]", metavar="N,E"),
+    Flag("--goal-latlon", "frame.goal_latlon", number_pair, "a geodetic goal instead [deg]", metavar="LAT,LON"),
+    Flag("--scale", "frame.scale", float, "metres per model unit"),
+    Flag("--heading-deg", "frame.heading_deg", float, "compass heading of the model's +x axis"),
+    Flag("--max-speed", "command.max_speed_mps", float, "the field's top speed maps to this [m/s]"),
+    Flag("--arm", "arm", None, "arm the vehicle after switching to GUIDED"),
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="steer a vehicle along a learned field over MAVLink (the guidance service)")
     p.add_argument("--model", required=True, type=Path, help="trained model file (.pt)")
-    p.add_argument("--mavlink", metavar="ENDPOINT", help="udp:HOST:PORT (listen), udpout:, tcp:, tcpin: or DEVICE,BAUD")
-    add_guidance_flags(p)
+    p.add_argument("--config", type=Path, help="YAML overriding config/guidance.yaml")
+    add_flags(p, GUIDANCE_FLAGS)
+    p.add_argument("--zenoh-config", type=Path, help="zenoh config (JSON5) replacing the loopback default")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     p.set_defaults(run=cmd_run)
 
     p = sub.add_parser("demo", help="train Zshape if needed, simulate a boat in a current, guide it home, plot")
@@ -34,55 +50,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=cmd_demo)
 
 
-def add_guidance_flags(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", type=Path, help="YAML overriding config/guidance.yaml")
-    p.add_argument("--vehicle-id", help="name on zenoh: koopguide/<id>/status")
-    p.add_argument("--goal-ned", metavar="N,E", type=pair, help="where the model's goal lands in local NED [m]")
-    p.add_argument("--goal-latlon", metavar="LAT,LON", type=pair, help="a geodetic goal instead [deg]")
-    p.add_argument("--scale", type=float, help="metres per model unit")
-    p.add_argument("--heading-deg", type=float, help="compass heading of the model's +x axis")
-    p.add_argument("--max-speed", type=float, help="the field's top speed maps to this [m/s]")
-    p.add_argument("--arm", action="store_true", default=None, help="arm the vehicle after switching to GUIDED")
-    p.add_argument("--zenoh-config", type=Path, help="zenoh config (JSON5) replacing the loopback default")
-    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
-
-
-def pair(text: str) -> tuple[float, float]:
-    parts = text.split(",")
-    try:
-        values = tuple(float(v) for v in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 2:
-        raise argparse.ArgumentTypeError(f"expected two numbers as A,B, got {text!r}")
-    return values  # type: ignore[return-value]
-
-
-def overrides_from(args: argparse.Namespace) -> dict[str, Any]:
-    """The flags given, as a nested mapping over config/guidance.yaml."""
-    out: dict[str, Any] = {}
-    frame: dict[str, Any] = {}
-    if getattr(args, "mavlink", None):
-        out["mavlink"] = {"endpoint": args.mavlink}
-    if args.vehicle_id is not None:
-        out["vehicle_id"] = args.vehicle_id
-    if args.arm:
-        out["arm"] = True
-    if args.goal_ned is not None:
-        frame["goal_ned"] = list(args.goal_ned)
-    if args.goal_latlon is not None:
-        frame["goal_latlon"] = list(args.goal_latlon)
-    if args.scale is not None:
-        frame["scale"] = args.scale
-    if args.heading_deg is not None:
-        frame["heading_deg"] = args.heading_deg
-    if frame:
-        out["frame"] = frame
-    if args.max_speed is not None:
-        out["command"] = {"max_speed_mps": args.max_speed}
-    return out
-
-
 def setup_logging(verbose: bool) -> None:
     logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
@@ -93,7 +60,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from koopguide.guidance import settings
     from koopguide.guidance.link import Endpoint
 
-    cfg = settings.load(args.config, overrides_from(args))
+    cfg = settings.load(args.config, overrides_from(args, GUIDANCE_FLAGS))
     Endpoint.parse(cfg.mavlink.endpoint)  # a bad endpoint is refused with the config's other errors
     if not args.model.is_file():
         raise ConfigError(f"model file {args.model} not found")

@@ -1,25 +1,32 @@
 """The guidance service's typed configuration: frozen dataclasses built from ``config/guidance.yaml``.
 
-Defaults live only in ``config/guidance.yaml``; these classes carry the types, the units (in the field
-names) and the range checks. :func:`load` merges defaults, the user's file and command-line overrides
-and raises :class:`koopguide.base.config.ConfigError` naming the key for anything unknown, ill-typed or out
-of range - before the service opens any link.
+Defaults live only in ``config/guidance.yaml`` (``koopguide/defaults/guidance.yaml``); these classes carry
+the types, the units (in the field names) and each number's interval (in its type, checked while
+loading: :mod:`koopguide.base.config`); ``__post_init__`` checks only relations between keys.
+:func:`load` merges defaults, the user's file and command-line overrides and raises
+:class:`koopguide.base.config.ConfigError` naming the key for anything unknown, ill-typed or out of
+range - before the service opens any link.
 """
 
 from __future__ import annotations
 
 import enum
-import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 from koopguide.base import config
-from koopguide.base.config import ConfigError
+from koopguide.base.config import FiniteFloat, Range, check
 
 VEHICLE_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")  # a zenoh key segment: no / * $ # ?
 MAX_RATE_HZ = 50.0
+Rate = Annotated[float, Range(0.0, MAX_RATE_HZ, lo_open=True)]  # [Hz]
+SystemId = Annotated[int, Range(1, 255)]
+ComponentId = Annotated[int, Range(0, 255)]
+Seconds = Annotated[float, Range(0.0, 3600.0, lo_open=True)]  # a positive duration up to an hour [s]
+Speed = Annotated[float, Range(0.0, 20.0)]  # a boat's speed [m/s]
+Distance = Annotated[float, Range(0.0, 1000.0)]  # [m]
 
 
 class ArrivalAction(enum.Enum):
@@ -41,137 +48,97 @@ class ExitMode(enum.Enum):
 @dataclass(frozen=True)
 class MavlinkSettings:
     endpoint: str
-    target_system: int
-    target_component: int
-    source_system: int
-    source_component: int
-    heartbeat_hz: float
-    position_rate_hz: float
-    link_timeout_s: float
-    reconnect_min_s: float
-    reconnect_max_s: float
-    command_retry_s: float
+    target_system: SystemId
+    target_component: ComponentId
+    source_system: SystemId
+    source_component: ComponentId
+    heartbeat_hz: Rate
+    position_rate_hz: Rate
+    link_timeout_s: Seconds
+    reconnect_min_s: Seconds
+    reconnect_max_s: Seconds
+    command_retry_s: Seconds
 
     def __post_init__(self) -> None:
-        for name in ("target_system", "source_system"):
-            _check(1 <= getattr(self, name) <= 255, f"mavlink.{name}", getattr(self, name), "1 .. 255")
-        for name in ("target_component", "source_component"):
-            _check(0 <= getattr(self, name) <= 255, f"mavlink.{name}", getattr(self, name), "0 .. 255")
-        for name in ("heartbeat_hz", "position_rate_hz", "link_timeout_s", "reconnect_min_s", "command_retry_s"):
-            _positive(self, "mavlink", name)
-        _check(self.reconnect_max_s >= self.reconnect_min_s, "mavlink.reconnect_max_s", self.reconnect_max_s,
-               f">= reconnect_min_s ({self.reconnect_min_s})")
+        check(self.reconnect_max_s >= self.reconnect_min_s, "mavlink.reconnect_max_s", self.reconnect_max_s,
+              f">= reconnect_min_s ({self.reconnect_min_s})")
 
 
 @dataclass(frozen=True)
 class FrameSettings:
-    goal_ned: tuple[float, float]  # [m]
-    goal_latlon: tuple[float, float] | None  # [deg]
-    scale: float  # metres per model unit
-    heading_deg: float  # compass heading of model +x
-
-    def __post_init__(self) -> None:
-        _finite(self, "frame", "goal_ned", "scale", "heading_deg")
-        _positive(self, "frame", "scale")
-        if self.goal_latlon is not None:
-            lat, lon = self.goal_latlon
-            _check(-90 <= lat <= 90 and -180 <= lon <= 180, "frame.goal_latlon", self.goal_latlon,
-                   "latitude -90 .. 90 and longitude -180 .. 180 degrees")
+    goal_ned: tuple[FiniteFloat, FiniteFloat]  # [m]
+    goal_latlon: tuple[Annotated[float, Range(-90.0, 90.0)], Annotated[float, Range(-180.0, 180.0)]] | None  # [deg]
+    scale: Annotated[float, Range(0.0, 1e6, lo_open=True)]  # metres per model unit
+    heading_deg: Annotated[float, Range(-360.0, 360.0)]  # compass heading of model +x
 
 
 @dataclass(frozen=True)
 class CommandSettings:
-    rate_hz: float
-    max_speed_mps: float
-    min_speed_mps: float
+    rate_hz: Rate
+    max_speed_mps: Annotated[float, Range(0.0, 20.0, lo_open=True)]
+    min_speed_mps: Speed
     turn_slowdown: bool
     current_compensation: bool
-    lookahead_m: float
+    lookahead_m: Distance
     with_yaw: bool
-    lead_s: float
-    domain_margin: float
-    speed_grid: int
+    lead_s: Annotated[float, Range(0.0, 5.0)]
+    domain_margin: Annotated[float, Range(0.0, 10.0)]
+    speed_grid: Annotated[int, Range(8, 512)]
 
     def __post_init__(self) -> None:
-        _finite(self, "command", "rate_hz", "max_speed_mps", "min_speed_mps", "lead_s", "domain_margin", "lookahead_m")
-        _check(0 < self.rate_hz <= MAX_RATE_HZ, "command.rate_hz", self.rate_hz, f"0 < rate <= {MAX_RATE_HZ:g}")
-        _positive(self, "command", "max_speed_mps")
-        _check(0 <= self.min_speed_mps <= self.max_speed_mps, "command.min_speed_mps", self.min_speed_mps,
-               f"0 .. max_speed_mps ({self.max_speed_mps})")
-        for name in ("lead_s", "domain_margin", "lookahead_m"):
-            _check(getattr(self, name) >= 0, f"command.{name}", getattr(self, name), ">= 0")
-        _check(self.speed_grid >= 8, "command.speed_grid", self.speed_grid, ">= 8")
+        check(self.min_speed_mps <= self.max_speed_mps, "command.min_speed_mps", self.min_speed_mps,
+              f"0 .. max_speed_mps ({self.max_speed_mps})")
 
 
 @dataclass(frozen=True)
 class ArrivalSettings:
-    radius_m: float
+    radius_m: Annotated[float, Range(0.0, 1000.0, lo_open=True)]
     on_arrival: ArrivalAction
-    station_gain: float
-    capture_radius_m: float
-    approach_radius_m: float
-    facing_deg: float
-    settle_radius_m: float
-    settle_timeout_s: float
+    station_gain: Annotated[float, Range(0.0, 100.0, lo_open=True)]  # [1/s]
+    capture_radius_m: Distance
+    approach_radius_m: Distance
+    facing_deg: Annotated[float, Range(0.0, 90.0, lo_open=True, hi_open=True)]
+    settle_radius_m: Distance
+    settle_timeout_s: Annotated[float, Range(0.0, 3600.0)]
 
     def __post_init__(self) -> None:
-        _positive(self, "arrival", "radius_m", "station_gain")
-        _finite(self, "arrival", "capture_radius_m", "approach_radius_m", "facing_deg", "settle_radius_m",
-                "settle_timeout_s")
-        _check(self.capture_radius_m >= 0, "arrival.capture_radius_m", self.capture_radius_m, ">= 0")
-        _check(self.approach_radius_m >= self.radius_m, "arrival.approach_radius_m", self.approach_radius_m,
-               f">= radius_m ({self.radius_m})")
-        _check(0 < self.facing_deg < 90, "arrival.facing_deg", self.facing_deg, "0 < angle < 90")
-        _check(0 <= self.settle_radius_m <= self.radius_m, "arrival.settle_radius_m", self.settle_radius_m,
-               f"0 .. radius_m ({self.radius_m})")
-        _check(self.settle_timeout_s >= 0, "arrival.settle_timeout_s", self.settle_timeout_s, ">= 0")
+        check(self.approach_radius_m >= self.radius_m, "arrival.approach_radius_m", self.approach_radius_m,
+              f">= radius_m ({self.radius_m})")
+        check(self.settle_radius_m <= self.radius_m, "arrival.settle_radius_m", self.settle_radius_m,
+              f"0 .. radius_m ({self.radius_m})")
 
 
 @dataclass(frozen=True)
 class EstimatorSettings:
-    position_std_m: float
-    velocity_std_mps: float
-    accel_std_mps2: float
-    gate_chi2: float
-    reset_after_rejections: int
-    max_dt_s: float
-    current_prior_std_mps: float
-    current_walk_mps_per_sqrt_s: float
-    current_max_turn_dps: float
-
-    def __post_init__(self) -> None:
-        _positive(self, "estimator", "position_std_m", "velocity_std_mps", "accel_std_mps2", "gate_chi2", "max_dt_s",
-                  "current_prior_std_mps", "current_max_turn_dps")
-        _finite(self, "estimator", "current_walk_mps_per_sqrt_s")
-        _check(self.current_walk_mps_per_sqrt_s >= 0, "estimator.current_walk_mps_per_sqrt_s",
-               self.current_walk_mps_per_sqrt_s, ">= 0")
-        _check(self.reset_after_rejections >= 1, "estimator.reset_after_rejections", self.reset_after_rejections,
-               ">= 1")
+    position_std_m: Annotated[float, Range(0.0, 100.0, lo_open=True)]
+    velocity_std_mps: Annotated[float, Range(0.0, 100.0, lo_open=True)]
+    accel_std_mps2: Annotated[float, Range(0.0, 100.0, lo_open=True)]
+    gate_chi2: Annotated[float, Range(0.0, 1e6, lo_open=True)]
+    reset_after_rejections: Annotated[int, Range(1, 1000)]
+    max_dt_s: Seconds
+    current_prior_std_mps: Annotated[float, Range(0.0, 20.0, lo_open=True)]
+    current_walk_mps_per_sqrt_s: Annotated[float, Range(0.0, 10.0)]
+    current_max_turn_dps: Annotated[float, Range(0.0, 360.0, lo_open=True)]
 
 
 @dataclass(frozen=True)
 class FailsafeSettings:
-    stale_after_s: float
+    stale_after_s: Seconds
     outside_domain: OutsideDomain
-    geofence_ned: tuple[tuple[float, float], tuple[float, float]] | None  # ((N_min, N_max), (E_min, E_max)) [m]
+    # ((N_min, N_max), (E_min, E_max)) [m]
+    geofence_ned: tuple[tuple[FiniteFloat, FiniteFloat], tuple[FiniteFloat, FiniteFloat]] | None
     on_exit: ExitMode
 
     def __post_init__(self) -> None:
-        _positive(self, "failsafe", "stale_after_s")
         if self.geofence_ned is not None:
             for axis, (lo, hi) in zip("NE", self.geofence_ned, strict=True):
-                _check(math.isfinite(lo) and math.isfinite(hi) and lo < hi, "failsafe.geofence_ned", self.geofence_ned,
-                       f"finite [min, max] with min < max on {axis}")
+                check(lo < hi, "failsafe.geofence_ned", self.geofence_ned, f"[min, max] with min < max on {axis}")
 
 
 @dataclass(frozen=True)
 class StatusSettings:
-    rate_hz: float
-    field_grid: int
-
-    def __post_init__(self) -> None:
-        _check(0 < self.rate_hz <= MAX_RATE_HZ, "status.rate_hz", self.rate_hz, f"0 < rate <= {MAX_RATE_HZ:g}")
-        _check(2 <= self.field_grid <= 200, "status.field_grid", self.field_grid, "2 .. 200")
+    rate_hz: Rate
+    field_grid: Annotated[int, Range(2, 200)]
 
 
 @dataclass(frozen=True)
@@ -187,34 +154,12 @@ class GuidanceConfig:
     status: StatusSettings
 
     def __post_init__(self) -> None:
-        _check(bool(VEHICLE_ID.match(self.vehicle_id)), "vehicle_id", self.vehicle_id,
-               "1-64 characters of A-Z a-z 0-9 _ -")
+        check(bool(VEHICLE_ID.match(self.vehicle_id)), "vehicle_id", self.vehicle_id,
+              "1-64 characters of A-Z a-z 0-9 _ -")
 
 
 def load(user_file: str | Path | None = None, overrides: dict[str, Any] | None = None) -> GuidanceConfig:
     """Defaults, then ``user_file``, then ``overrides`` (nested like the YAML), checked."""
-    try:
-        return config.build(GuidanceConfig, config.load_layers("guidance", user_file, overrides or {}))
-    except (TypeError, ValueError) as exc:  # a range check raised while building
-        if isinstance(exc, ConfigError):
-            raise
-        raise ConfigError(str(exc)) from None
+    return config.build(GuidanceConfig, config.load_layers("guidance", user_file, overrides or {}))
 
-
-def _check(ok: bool, key: str, value: Any, expected: str) -> None:
-    if not ok:
-        raise ConfigError(f"{key}: {value!r} is out of range (expected {expected})")
-
-
-def _positive(obj: Any, section: str, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        _check(math.isfinite(value) and value > 0, f"{section}.{name}", value, "a finite number > 0")
-
-
-def _finite(obj: Any, section: str, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        values = value if isinstance(value, tuple) else (value,)
-        _check(all(math.isfinite(v) for v in values), f"{section}.{name}", value, "finite numbers")
 

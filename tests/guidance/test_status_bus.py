@@ -51,6 +51,8 @@ def sample_status(vehicle_id: str = "boat1", **changes: Any) -> dict[str, Any]:
         "seq": 7,
         "vehicle_id": vehicle_id,
         "state": "guiding",
+        "reason": "following_the_field",
+        "degraded": False,
         "mode": "GUIDED",
         "armed": True,
         "position_ned": [12.5, -3.25],
