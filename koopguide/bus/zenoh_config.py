@@ -48,15 +48,6 @@ def default_zenoh_config(port: int = WELL_KNOWN_PORT) -> zenoh.Config:
     return cfg
 
 
-def config_summary(cfg: zenoh.Config) -> str:
-    """One line for logs: mode, listen and connect endpoints, multicast scouting."""
-    parts = [f"mode {json.loads(cfg.get_json('mode')) or 'peer'}"]
-    for key in ("listen/endpoints", "connect/endpoints"):
-        parts.append(f"{key.split('/')[0]} {json.loads(cfg.get_json(key))}")
-    parts.append(f"multicast {'on' if json.loads(cfg.get_json('scouting/multicast/enabled')) else 'off'}")
-    return ", ".join(parts)
-
-
 def _with_port(endpoint: str, port: int) -> str:
     suffix = f":{WELL_KNOWN_PORT}"
     return endpoint[: -len(suffix)] + f":{port}" if endpoint.endswith(suffix) else endpoint

@@ -41,8 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=cmd_plot)
 
     p = sub.add_parser("bench", help="benchmarks that print figures (never timed tests)")
-    p.add_argument("what", choices=["speed", "sitl", "guidance"],
-                   help="speed: training and query speed; sitl: simulator; guidance: service latency and CPU")
+    p.add_argument("what", choices=["speed", "sitl", "guidance", "missions"],
+                   help="speed: training and query speed; sitl: simulator; guidance: service latency and CPU; "
+                   "missions: closed-loop campaign of vehicles x flows x starts")
     p.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the benchmark")
     p.set_defaults(run=cmd_bench)
 
@@ -140,6 +141,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from sitl import bench as sitl_bench
 
         return sitl_bench.main(args.rest)
+    if args.what == "missions":
+        from koopguide.harness import campaign
+
+        return campaign.main(args.rest)
     if args.what == "guidance":
         from koopguide.harness import guidance_bench
 

@@ -62,6 +62,7 @@ def sim_overrides(pose: tuple[float, float, float], port: int, world: dict[str, 
 class MissionResult:
     arrived: bool
     arrival_time_s: float | None  # simulated time from the service's first setpoint to arrival
+    arrived_at_s: float | None  # simulated time of arrival (the clock of ``track``)
     track: np.ndarray  # (T, 3): t, N, E of the true boat [s, m, m]
     transitions: list[tuple[float, str]]
     max_setpoint_mps: float
@@ -121,6 +122,7 @@ def summarize(daemon: Any, records: list[dict[str, Any]], t_start: float | None,
     return MissionResult(
         arrived=t_arrived is not None,
         arrival_time_s=None if t_arrived is None or t_start is None else t_arrived - t_start,
+        arrived_at_s=t_arrived,
         track=track, transitions=list(daemon.transitions), max_setpoint_mps=daemon.max_cmd_speed,
         final_distance_m=float(dist[-1]), max_distance_after_arrival_m=after, law=daemon.law,
         mode_before_exit=daemon.mode_before_exit,
@@ -136,32 +138,44 @@ def print_progress(status: dict[str, Any]) -> None:
           f"to goal {dist if dist is not None else float('nan'):.2f} m  cmd {speed:.2f} m/s", file=sys.stderr)
 
 
-def demo_mission(model: Path, start_index: int, current_mps: float, speedup: float, vehicle_id: str = "demo",
-                 seed: int = 0) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
-    """The README's mission: a Zshape demo start, goal at NED (0, 0), 0.04 m per unit, model +x East,
-    0.3 m/s top speed, in a uniform current toward the north (across the field's final leg)."""
-    from koopguide.base import data
+def mission_at(model: Path, start_model: np.ndarray, speedup: float, flow: dict[str, Any] | None = None,
+               vehicle_id: str = "demo", seed: int = 0, sim_extra: dict[str, Any] | None = None,
+               guidance_extra: dict[str, Any] | None = None) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
+    """The README's mission set-up from any model point: goal at NED (0, 0), 0.04 m per unit, model +x
+    East, 0.3 m/s top speed; the boat starts at ``start_model`` heading along the field, in a tank around
+    the model's domain. ``flow`` is the simulator's ``flow`` section (None: calm water); ``sim_extra`` and
+    ``guidance_extra`` are further overrides of the simulator's and the service's configs."""
+    from koopguide.base import config
     from koopguide.guidance import settings
     from koopguide.model.field import load_field
     from sitl import config as sitl_config
 
     port = free_udp_port()
-    cfg = settings.load(overrides={
+    cfg = settings.load(overrides=config.merge({
         "vehicle_id": vehicle_id, "arm": True, "mavlink": {"endpoint": f"udp:127.0.0.1:{port}"},
         "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0}, "command": {"max_speed_mps": 0.3},
-    })
+    }, guidance_extra or {}))
     field_ = load_field(model)
     frame = ModelFrame.place(field_.goal, cfg.frame)
-    starts = data.load_lasa("Zshape").trajectories
-    if not 0 <= start_index < len(starts):
-        raise ValueError(f"--start must be 0 .. {len(starts) - 1}, got {start_index}")
-    pose = demo_start_pose(field_, frame, starts[start_index][0])
+    pose = demo_start_pose(field_, frame, np.asarray(start_model, dtype=float))
     lo, hi = field_.bounds
     corners = frame.to_ned(np.array([lo, hi, [lo[0], hi[1]], [hi[0], lo[1]]]))
     world = tank_around(np.vstack([corners, [pose[:2]]]))
+    overrides = config.merge(sim_overrides(pose, port, world, speedup, flow, seed), sim_extra or {})
+    return cfg, sitl_config.load(overrides=overrides), pose
+
+
+def demo_mission(model: Path, start_index: int, current_mps: float, speedup: float, vehicle_id: str = "demo",
+                 seed: int = 0) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
+    """The README's mission from a Zshape demo start, in a uniform current toward the north (across the
+    field's final leg)."""
+    from koopguide.base import data
+
+    starts = data.load_lasa("Zshape").trajectories
+    if not 0 <= start_index < len(starts):
+        raise ValueError(f"--start must be 0 .. {len(starts) - 1}, got {start_index}")
     flow = {"kinds": ["uniform"], "uniform": {"speed_mps": current_mps, "direction_deg": 0.0}} if current_mps else None
-    sim_cfg = sitl_config.load(overrides=sim_overrides(pose, port, world, speedup, flow, seed))
-    return cfg, sim_cfg, pose
+    return mission_at(model, starts[start_index][0], speedup, flow, vehicle_id, seed)
 
 
 def run_demo(args: Any) -> int:

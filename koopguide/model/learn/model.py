@@ -49,11 +49,6 @@ class FourierKoopman(nn.Module):
         """One application of ``K``: ``(N, nu + d) -> (N, nu + d)``."""
         return (z @ self.B) @ self.A.T
 
-    def read_state(self, z: torch.Tensor) -> torch.Tensor:
-        """The state encoded in a lifted vector (its first ``d`` entries, plus the goal if centred)."""
-        x = z[:, : self.dim]
-        return x + self.goal if self.goal_centred else x
-
     def step(self, x: torch.Tensor) -> torch.Tensor:
         """Re-lifted next state ``f(x) = [K Psi(x)]_{1:d}``; only the ``d`` state rows of ``K`` are used."""
         y = (self.lift(x) @ self.B) @ self.A[: self.dim].T
