@@ -3,7 +3,9 @@
 Three parts, so the table can be tested without zenoh:
 
 * :class:`MonitorState` - what is known about each vehicle, fed with raw status payloads and
-  liveliness events (malformed payloads are counted, never raised);
+  liveliness events (malformed payloads are counted, never raised). Statuses that look forged are
+  flagged and not shown as the vehicle's: a second publisher for a vehicle whose publisher is still
+  live, or a sequence number that does not increase (zenoh's trust model: docs/zenoh.md, "Trust");
 * :func:`render_table` - that state as a plain-text table (pure);
 * :class:`Monitor` - a zenoh session subscribed to ``koopguide/*/status`` and to liveliness
   ``koopguide/*/alive`` (with history, so vehicles already alive show at once). Samples wait in
@@ -28,6 +30,8 @@ STATUS_KEYS = "koopguide/*/status"
 ALIVE_KEYS = "koopguide/*/alive"
 #: Samples a channel holds between two polls before dropping the oldest.
 CHANNEL_CAPACITY = 4096
+#: A vehicle's publisher silent this long [s] may be replaced by another (a restarted service).
+PUBLISHER_HANDOVER_S = 2.0
 
 
 @dataclass
@@ -41,6 +45,9 @@ class VehicleView:
     alive: bool | None = None  # liveliness token present; None: never seen one
     malformed: int = 0  # payloads on this vehicle's status key that broke the schema
     last_error: str | None = None
+    source: str | None = None  # zenoh id of the publisher whose statuses are shown
+    suspect: int = 0  # statuses that look forged: another publisher, or a sequence that does not increase
+    last_suspect: str | None = None
 
 
 class MonitorState:
@@ -57,8 +64,8 @@ class MonitorState:
             view = self.vehicles[vehicle_id] = VehicleView(vehicle_id)
         return view
 
-    def on_status(self, key: str, payload: bytes, now: float) -> None:
-        """One payload put on ``koopguide/<id>/status``."""
+    def on_status(self, key: str, payload: bytes, now: float, source: str | None = None) -> None:
+        """One payload put on ``koopguide/<id>/status`` by publisher ``source`` (its zenoh id, when known)."""
         view = self.vehicle(vehicle_id_of(key))
         try:
             status = decode_status(payload)
@@ -72,9 +79,28 @@ class MonitorState:
             self.malformed += 1
             self.last_error = f"{view.vehicle_id}: {exc}"
             return
+        doubt = self._doubt(view, status, now, source)
+        if doubt is not None:
+            view.suspect += 1
+            view.last_suspect = doubt
+            return
+        view.source = source if source is not None else view.source
         view.status = status
         view.received_at = now
         view.statuses += 1
+
+    @staticmethod
+    def _doubt(view: VehicleView, status: dict[str, Any], now: float, source: str | None) -> str | None:
+        """Why this well-formed status looks forged, or None."""
+        live = view.received_at is not None and now - view.received_at <= PUBLISHER_HANDOVER_S
+        if source is not None and view.source is not None and source != view.source:
+            if live:
+                return f"a second publisher {source[:8]} for a vehicle published by {view.source[:8]}"
+            return None  # the old publisher went quiet: a restarted service takes over
+        previous = view.status["seq"] if view.status is not None else None
+        if previous is not None and live and status["seq"] <= previous:
+            return f"sequence went from {previous} to {status['seq']}"
+        return None
 
     def on_liveliness(self, key: str, alive: bool) -> None:
         """A token ``koopguide/<id>/alive`` appeared (True) or went away (False)."""
@@ -84,6 +110,14 @@ class MonitorState:
         """At least one status arrived, and every vehicle whose token is alive has sent one."""
         views = self.vehicles.values()
         return any(v.status is not None for v in views) and all(v.status is not None for v in views if v.alive)
+
+
+def publisher_of(sample: zenoh.Sample) -> str | None:
+    """The publishing session's zenoh id: from the sample's source info, else its timestamp's clock id."""
+    info = sample.source_info
+    if info is not None and info.source_id is not None:
+        return str(info.source_id)
+    return str(sample.timestamp.get_id()) if sample.timestamp is not None else None
 
 
 def vehicle_id_of(key: str) -> str:
@@ -97,9 +131,9 @@ def vehicle_id_of(key: str) -> str:
 #: age of the last status received here, guidance loop latency percentiles, malformed payloads.
 COLUMNS = (
     "VEHICLE", "LIVE", "STATE", "MODE", "ARMED", "N[m]", "E[m]", "TO GOAL[m]", "CMD[m/s]",
-    "POS AGE[s]", "MSG AGE[s]", "LOOP p50/p99[ms]", "BAD",
+    "POS AGE[s]", "MSG AGE[s]", "LOOP p50/p99[ms]", "BAD", "SUSPECT",
 )
-_RIGHT_ALIGNED = frozenset({"N[m]", "E[m]", "TO GOAL[m]", "CMD[m/s]", "POS AGE[s]", "MSG AGE[s]", "BAD"})
+_RIGHT_ALIGNED = frozenset({"N[m]", "E[m]", "TO GOAL[m]", "CMD[m/s]", "POS AGE[s]", "MSG AGE[s]", "BAD", "SUSPECT"})
 
 
 def render_table(vehicles: dict[str, VehicleView], now: float, *, malformed: int = 0,
@@ -116,6 +150,10 @@ def render_table(vehicles: dict[str, VehicleView], now: float, *, malformed: int
     lines = [header]
     if last_error and malformed:
         lines.append(f"  last malformed: {_clip(last_error, 110)}")
+    for view in sorted(vehicles.values(), key=lambda v: v.vehicle_id):
+        if view.last_suspect:
+            lines.append(f"  SUSPECT {view.vehicle_id}: {view.suspect} status(es) ignored, last: "
+                         f"{_clip(view.last_suspect, 90)}")
     if not vehicles:
         lines.append("(no vehicles yet: waiting for koopguide/*/status and koopguide/*/alive)")
         return "\n".join(lines)
@@ -131,7 +169,8 @@ def _row(view: VehicleView, now: float) -> tuple[str, ...]:
     status_age = "-" if view.received_at is None else _num(max(0.0, now - view.received_at), 1)
     s = view.status
     if s is None:
-        return (view.vehicle_id, live, "-", "-", "-", "-", "-", "-", "-", "-", status_age, "-", str(view.malformed))
+        return (view.vehicle_id, live, "-", "-", "-", "-", "-", "-", "-", "-", status_age, "-", str(view.malformed),
+                str(view.suspect))
     position = s["position_ned"] or (None, None)
     cmd = s["cmd_velocity_ned"]
     latency = s["loop_latency_ms"]
@@ -149,6 +188,7 @@ def _row(view: VehicleView, now: float) -> tuple[str, ...]:
         status_age,
         f"{_num(latency['p50'], 1)}/{_num(latency['p99'], 1)}",
         str(view.malformed),
+        str(view.suspect),
     )
 
 
@@ -202,7 +242,7 @@ class Monitor:
             count += 1
         while (sample := self._statuses.try_recv()) is not None:
             if sample.kind == zenoh.SampleKind.PUT:
-                self.state.on_status(str(sample.key_expr), sample.payload.to_bytes(), now)
+                self.state.on_status(str(sample.key_expr), sample.payload.to_bytes(), now, publisher_of(sample))
             count += 1
         return count
 

@@ -15,8 +15,9 @@ nothing. A failing put is logged once per outage, never per cycle.
 
 Threads: no Python callback is handed to zenoh (a callback left declared keeps a thread alive and
 hangs the process at exit). Queries arrive in zenoh ring channels and a task on the event loop
-drains them every :data:`QUERY_POLL_S`, so ``sample_field`` and ``config_snapshot`` run on the
-event loop, like the rest of the daemon.
+drains them every :data:`QUERY_POLL_S`. ``config_snapshot`` is cheap and runs on the event loop;
+``sample_field`` (up to 100 x 100 field evaluations and their JSON) runs on a worker thread, one query
+at a time, so a field query never holds up the control loop.
 """
 
 from __future__ import annotations
@@ -170,8 +171,11 @@ class StatusBus:
     # --------------------------------------------------------------------------------- queries
     async def _serve_queries(self) -> None:
         while (declared := self._declared) is not None:
-            self._drain(declared.field_queryable, self.keys.field, self._field_reply)
-            self._drain(declared.config_queryable, self.keys.config, self._config_reply)
+            while (query := declared.field_queryable.try_recv()) is not None:
+                # off the event loop: the answer costs milliseconds of numpy and JSON (cached per grid)
+                await asyncio.to_thread(_reply_and_drop, query, self.keys.field, self._field_reply)
+            while (query := declared.config_queryable.try_recv()) is not None:
+                _reply_and_drop(query, self.keys.config, self._config_reply)
             await asyncio.sleep(QUERY_POLL_S)
 
     def _field_reply(self, query: zenoh.Query) -> Any:
@@ -180,14 +184,14 @@ class StatusBus:
     def _config_reply(self, _query: zenoh.Query) -> Any:
         return self._config_snapshot()
 
-    def _drain(self, queryable: zenoh.Queryable, key: str, answer: Callable[[zenoh.Query], Any]) -> None:
-        while (query := queryable.try_recv()) is not None:
-            try:
-                _answer(query, key, answer)
-            except zenoh.ZError as exc:  # the asker left, or the session is closing
-                logger.debug("could not reply to a query on %s: %s", key, zenoh_error_text(exc))
-            finally:
-                query.drop()  # tells the asker that no more replies follow
+
+def _reply_and_drop(query: zenoh.Query, key: str, answer: Callable[[zenoh.Query], Any]) -> None:
+    try:
+        _answer(query, key, answer)
+    except zenoh.ZError as exc:  # the asker left, or the session is closing
+        logger.debug("could not reply to a query on %s: %s", key, zenoh_error_text(exc))
+    finally:
+        query.drop()  # tells the asker that no more replies follow
 
 
 def _answer(query: zenoh.Query, key: str, answer: Callable[[zenoh.Query], Any]) -> None:

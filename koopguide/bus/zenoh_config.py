@@ -22,6 +22,10 @@ from koopguide.base.config import CONFIG_DIR, ConfigError, read_config_text
 
 #: The shipped default configuration.
 DEFAULT_ZENOH_CONFIG_FILE = CONFIG_DIR / "zenoh.json5"
+#: The shipped templates with authentication and access control (docs/zenoh.md, "Trust"): the router
+#: that enforces them, and its clients.
+ACL_ROUTER_CONFIG_FILE = CONFIG_DIR / "zenoh-router-acl.json5"
+ACL_CLIENT_CONFIG_FILE = CONFIG_DIR / "zenoh-client-auth.json5"
 #: The rendezvous port of the default configuration (loopback only).
 WELL_KNOWN_PORT = 7447
 
@@ -33,16 +37,19 @@ def load_zenoh_config(path: str | Path | None) -> zenoh.Config:
     return _read(Path(path))
 
 
-def default_zenoh_config(port: int = WELL_KNOWN_PORT) -> zenoh.Config:
-    """The shipped default; ``port`` moves its rendezvous port (a separate group, e.g. for tests)."""
+def default_zenoh_config(port: int = WELL_KNOWN_PORT, file: Path = DEFAULT_ZENOH_CONFIG_FILE) -> zenoh.Config:
+    """The shipped default (or another shipped ``file``); ``port`` moves its rendezvous port (a separate
+    group, e.g. for tests)."""
     if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
         raise ValueError(f"zenoh rendezvous port must be an integer in 1..65535, got {port!r}")
-    cfg = _read(DEFAULT_ZENOH_CONFIG_FILE)
+    cfg = _read(file)
     if port != WELL_KNOWN_PORT:
         for key in ("listen/endpoints", "connect/endpoints"):
             endpoints = json.loads(cfg.get_json(key))
-            if not isinstance(endpoints, list):  # the shipped file uses plain lists, not per-mode maps
-                raise ConfigError(f"{DEFAULT_ZENOH_CONFIG_FILE}: {key} must be a list, got {endpoints!r}")
+            if isinstance(endpoints, dict):  # not set in the file: zenoh's per-mode defaults, no 7447 in them
+                continue
+            if not isinstance(endpoints, list):
+                raise ConfigError(f"{file}: {key} must be a list, got {endpoints!r}")
             moved = [_with_port(endpoint, port) for endpoint in endpoints]
             cfg.insert_json5(key, json.dumps(moved))
     return cfg

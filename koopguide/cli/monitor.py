@@ -9,6 +9,7 @@ stops after S seconds; Ctrl-C stops cleanly with exit code 0.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import shutil
@@ -40,6 +41,45 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help=f"print one table once every alive vehicle has reported; exit 1 if no status "
                            f"arrives within {ONCE_TIMEOUT_S:g} s")
     p.set_defaults(run=cmd_monitor)
+
+    p = sub.add_parser("zenoh-router", help="a zenoh router for a group of koopguide processes (e.g. with access "
+                       "control: config/zenoh-router-acl.json5), until interrupted")
+    p.add_argument("--zenoh-config", type=Path, metavar="FILE", required=True,
+                   help="the router's zenoh configuration (JSON5), e.g. a copy of config/zenoh-router-acl.json5")
+    p.add_argument("--duration", type=float, metavar="S", help="exit (code 0) after S seconds")
+    p.set_defaults(run=cmd_router)
+
+
+def cmd_router(args: argparse.Namespace) -> int:
+    """Hold a zenoh session in router mode open until SIGINT/SIGTERM (or ``--duration``)."""
+    import signal
+
+    import zenoh
+
+    from koopguide.base.config import ConfigError
+    from koopguide.bus.zenoh_config import load_zenoh_config, zenoh_error_text
+
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ValueError(f"--duration must be a positive number of seconds, got {args.duration:g}")
+    cfg = load_zenoh_config(args.zenoh_config)
+    if json.loads(cfg.get_json("mode")) != "router":
+        raise ConfigError(f"{args.zenoh_config}: mode must be \"router\" for a router")
+    try:
+        session = zenoh.open(cfg)
+    except zenoh.ZError as exc:
+        raise ConfigError(f"cannot start the zenoh router: {zenoh_error_text(exc)}") from None
+    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt))
+    try:
+        print(f"koopguide zenoh-router: {session.zid()} listening on {json.loads(cfg.get_json('listen/endpoints'))}",
+              file=sys.stderr, flush=True)
+        end = math.inf if args.duration is None else time.monotonic() + args.duration
+        while time.monotonic() < end:
+            time.sleep(min(0.2, max(0.0, end - time.monotonic())))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        session.close()
+    return 0
 
 
 def cmd_monitor(args: argparse.Namespace) -> int:

@@ -7,6 +7,7 @@ example run as subprocesses with a ``--zenoh-config`` file: the shipped default 
 from __future__ import annotations
 
 import asyncio
+import json
 import signal
 import subprocess
 import sys
@@ -19,10 +20,16 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from koopguide.bus.monitor import Monitor, MonitorState, VehicleView, render_table
+from koopguide.bus.monitor import PUBLISHER_HANDOVER_S, Monitor, MonitorState, VehicleView, render_table
 from koopguide.bus.status import encode_status
 from koopguide.bus.status_bus import StatusBus
-from koopguide.bus.zenoh_config import DEFAULT_ZENOH_CONFIG_FILE, WELL_KNOWN_PORT, default_zenoh_config
+from koopguide.bus.zenoh_config import (
+    ACL_CLIENT_CONFIG_FILE,
+    ACL_ROUTER_CONFIG_FILE,
+    DEFAULT_ZENOH_CONFIG_FILE,
+    WELL_KNOWN_PORT,
+    default_zenoh_config,
+)
 from tests.guidance.test_status_bus import config_snapshot, field_sampler, free_port, sample_status, wait_for
 
 REPO = Path(__file__).resolve().parents[2]
@@ -103,14 +110,14 @@ def test_render_table_shows_every_column():
     assert "vehicles 3 (alive 2)" in lines[0]
     header, rows = lines[1], lines[2:]
     for column in ("VEHICLE", "LIVE", "STATE", "MODE", "ARMED", "N[m]", "E[m]", "TO GOAL[m]", "CMD[m/s]",
-                   "POS AGE[s]", "MSG AGE[s]", "LOOP p50/p99[ms]", "BAD"):
+                   "POS AGE[s]", "MSG AGE[s]", "LOOP p50/p99[ms]", "BAD", "SUSPECT"):
         assert column in header
     assert [r.split()[0] for r in rows] == ["boat-2", "boat1", "ghost"]  # sorted by id
     boat1 = rows[1].split()
     assert boat1 == ["boat1", "alive", "guiding", "GUIDED", "yes", "12.5", "-3.2", "12.9", "0.90", "0.04", "0.2",
-                     "0.8/2.5", "0"]
+                     "0.8/2.5", "0", "0"]
     assert rows[0].split()[:5] == ["boat-2", "gone", "waiting", "-", "-"]
-    assert rows[0].split()[-3:] == ["4.0", "-/-", "0"]
+    assert rows[0].split()[-4:] == ["4.0", "-/-", "0", "0"]
     assert rows[2].split()[:3] == ["ghost", "alive", "-"]
 
 
@@ -129,7 +136,54 @@ def test_malformed_payloads_are_counted_never_raised():
     assert state.vehicles["boat1"].status["seq"] == 1  # the good one is kept
     table = render_table(state.vehicles, now, malformed=state.malformed, last_error=state.last_error)
     assert "malformed statuses 3" in table and "last malformed: boat1:" in table
-    assert table.splitlines()[-1].split()[-1] == "3"
+    assert table.splitlines()[-1].split()[-2:] == ["3", "0"]  # BAD, SUSPECT
+
+
+def test_a_second_publisher_or_a_sequence_going_back_is_flagged_not_shown():
+    state = MonitorState()
+    now = 1_700_000_000.0
+    real, forger = "a1b2c3d4e5f6", "ffee00112233"
+    state.on_status("koopguide/boat1/status", encode_status(sample_status("boat1", seq=5)), now, real)
+    # a forger claims the boat has arrived: another publisher while the real one is live
+    state.on_status("koopguide/boat1/status", encode_status(sample_status("boat1", seq=6, state="arrived")),
+                    now + 0.1, forger)
+    view = state.vehicles["boat1"]
+    assert view.status["state"] == "guiding" and view.status["seq"] == 5
+    assert view.suspect == 1 and "second publisher ffee0011" in view.last_suspect
+    # a replayed (old) status from the real publisher's id: the sequence does not increase
+    state.on_status("koopguide/boat1/status", encode_status(sample_status("boat1", seq=3, state="arrived")),
+                    now + 0.2, real)
+    assert view.suspect == 2 and "sequence went from 5 to 3" in view.last_suspect
+    assert view.status["state"] == "guiding"
+    table = render_table(state.vehicles, now + 0.3)
+    assert "SUSPECT boat1: 2 status(es) ignored" in table
+    # the real publisher goes on; after it has been silent past the hand-over time a new one may take over
+    state.on_status("koopguide/boat1/status", encode_status(sample_status("boat1", seq=6)), now + 0.3, real)
+    assert view.status["seq"] == 6 and view.statuses == 2
+    later = now + 0.3 + PUBLISHER_HANDOVER_S + 0.1
+    state.on_status("koopguide/boat1/status", encode_status(sample_status("boat1", seq=1)), later, forger)
+    assert view.source == forger and view.status["seq"] == 1 and view.suspect == 2
+
+
+def test_a_forged_status_from_another_zenoh_peer_is_flagged_by_the_monitor():
+    port = free_port()
+    with publishing("boat1", port, state="guiding"):
+        monitor = Monitor.open(default_zenoh_config(port))
+        forger = zenoh.open(default_zenoh_config(port))
+        try:
+            wait_for(lambda: monitor.poll() >= 0 and monitor.state.vehicles.get("boat1")
+                     and monitor.state.vehicles["boat1"].status is not None)
+            for seq in range(10**6, 10**6 + 20):  # a forged "arrived", with a sequence ahead of the real one
+                forger.put("koopguide/boat1/status", encode_status(sample_status("boat1", seq=seq, state="arrived")))
+                time.sleep(0.02)
+                monitor.poll()
+            view = wait_for(lambda: monitor.poll() >= 0 and monitor.state.vehicles["boat1"].suspect >= 10
+                            and monitor.state.vehicles["boat1"])
+            assert view.status["state"] == "guiding"  # the real publisher's state is what is shown
+            assert "second publisher" in view.last_suspect
+        finally:
+            forger.close()
+            monitor.close()
 
 
 def test_ready_once_every_alive_vehicle_reported():
@@ -247,3 +301,54 @@ def test_example_subscriber_prints_states_and_positions(tmp_path: Path):
     first = result.stdout.splitlines()[0].split()
     assert first == ["boat1", "guiding", "N", "12.50", "m", "E", "-3.25", "m"]
 
+
+
+# ------------------------------------------------------------------------ access control
+def secured(file: Path, port: int, credentials: Path, user: str | None = None, password: str | None = None,
+            ) -> zenoh.Config:
+    """A shipped access-control template on ``port``: the router (with ``credentials``) or a client."""
+    cfg = default_zenoh_config(port, file=file)
+    if user is None:
+        cfg.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(credentials)))
+    else:
+        cfg.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
+        cfg.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
+    return cfg
+
+
+def test_behind_the_access_control_router_a_peer_without_rights_cannot_publish_a_status(tmp_path: Path):
+    credentials = tmp_path / "credentials.txt"
+    credentials.write_text("koopguide-service:s3rvice\nkoopguide-viewer:v1ewer\nintruder:1ntruder\n")
+    port = free_port()
+    router = zenoh.open(secured(ACL_ROUTER_CONFIG_FILE, port, credentials))
+
+    def client(user: str, password: str) -> zenoh.Config:
+        return secured(ACL_CLIENT_CONFIG_FILE, port, credentials, user, password)
+
+    monitor = Monitor.open(client("koopguide-viewer", "v1ewer"))
+    service = zenoh.open(client("koopguide-service", "s3rvice"))
+    with pytest.raises(zenoh.ZError):  # a service's name with a wrong password: the router refuses it
+        zenoh.open(client("koopguide-service", "guessed")).close()
+    forgers = [zenoh.open(client("intruder", "1ntruder")),  # known to the router, but without rights
+               zenoh.open(client("koopguide-viewer", "v1ewer"))]  # a viewer trying to publish
+    try:
+        time.sleep(0.5)  # let the sessions connect (or fail to)
+        for seq in range(1, 41):
+            service.put("koopguide/boat1/status", encode_status(sample_status("boat1", seq=seq)))
+            for forger in forgers:
+                forger.put("koopguide/boat1/status",
+                           encode_status(sample_status("boat1", seq=10**6 + seq, state="arrived")))
+                forger.put("koopguide/ghost/status", encode_status(sample_status("ghost", seq=seq)))
+            time.sleep(0.01)
+        view = wait_for(lambda: monitor.poll() >= 0 and monitor.state.vehicles.get("boat1")
+                        and monitor.state.vehicles["boat1"].statuses == 40 and monitor.state.vehicles["boat1"])
+        time.sleep(0.3)
+        monitor.poll()
+        assert view.status["state"] == "guiding" and view.status["seq"] == 40
+        assert view.suspect == 0  # the forgeries never reached the monitor at all
+        assert "ghost" not in monitor.state.vehicles
+    finally:
+        for session in (*forgers, service):
+            session.close()
+        monitor.close()
+        router.close()
