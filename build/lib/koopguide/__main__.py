@@ -1,0 +1,5 @@
+import sys
+
+from koopguide.cli import main
+
+sys.exit(main())

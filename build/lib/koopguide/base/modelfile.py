@@ -1,0 +1,170 @@
+"""The model file: a torch ``.pt`` archive that also reads without torch.
+
+Writing uses ``torch.save`` on a dict of float64 tensors and plain metadata, so
+``torch.load(path, weights_only=True)`` reads it. Reading at query time needs numpy only: the archive
+is a zip holding ``data.pkl`` and one raw little-endian buffer per tensor; :func:`read` unpickles it
+with an allow-list (tensors, ordered dicts, nothing else), the same safety as ``weights_only``.
+
+Layout of the saved dict::
+
+    {"format": "koopguide-field", "format_version": 1,
+     "weights": {"W": (nu, d), "b": (nu,), "A": (nu + d, r), "B": (nu + d, r)},   # float64 tensors
+     "meta": {"dim", "goal", "substeps", "goal_centred", "nu", "rank", "bounds_lo", "bounds_hi",
+              "hyperparameters", "data", "train"}}
+"""
+
+from __future__ import annotations
+
+import collections
+import io
+import pickle
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+FORMAT = "koopguide-field"
+FORMAT_VERSION = 1
+
+
+class ModelFileError(ValueError):
+    """A model file that cannot be used: missing, corrupt, truncated, wrong kind or newer format."""
+
+
+def write(path: str | Path, weights: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+    """Save weights (float64) and metadata with ``torch.save`` (torch is a training dependency)."""
+    import torch
+
+    payload = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "weights": {k: torch.from_numpy(np.ascontiguousarray(v, dtype=np.float64)) for k, v in weights.items()},
+        "meta": meta,
+    }
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(payload, tmp)
+    tmp.replace(path)  # never leave a half-written model under the final name
+
+
+def read(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Load ``(weights, meta)`` with numpy only; every failure is a :class:`ModelFileError`."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError(f"{path}: model file not found")
+    try:
+        archive = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise ModelFileError(f"{path}: not a koopguide model file (not a torch zip archive: {exc})") from None
+    with archive:
+        names = archive.namelist()
+        pkl = [n for n in names if n.endswith("/data.pkl") or n == "data.pkl"]
+        if len(pkl) != 1:
+            raise ModelFileError(f"{path}: not a torch archive (no data.pkl among {len(names)} entries)")
+        prefix = pkl[0][: -len("data.pkl")]
+        byteorder = prefix + "byteorder"
+        if byteorder in names and archive.read(byteorder).strip() not in (b"little", b""):
+            raise ModelFileError(f"{path}: big-endian tensors are not supported")
+        try:
+            payload = _Unpickler(io.BytesIO(archive.read(pkl[0])), archive, prefix).load()
+        except ModelFileError as exc:
+            raise ModelFileError(f"{path}: {exc}") from None
+        except (pickle.UnpicklingError, EOFError, KeyError, ValueError, TypeError, zipfile.BadZipFile,
+                AttributeError, IndexError, OSError) as exc:
+            raise ModelFileError(f"{path}: corrupt or truncated model file ({type(exc).__name__}: {exc})") from None
+    return _validate(path, payload)
+
+
+def _validate(path: Path, payload: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        kind = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
+        raise ModelFileError(f"{path}: wrong kind of file: format {kind!r}, expected {FORMAT!r}")
+    version = payload.get("format_version")
+    if not isinstance(version, int):
+        raise ModelFileError(f"{path}: format_version missing or not an integer: {version!r}")
+    if version > FORMAT_VERSION:
+        raise ModelFileError(
+            f"{path}: model format version {version} is newer than this koopguide reads ({FORMAT_VERSION}); "
+            "upgrade koopguide"
+        )
+    weights, meta = payload.get("weights"), payload.get("meta")
+    if not isinstance(weights, dict) or not isinstance(meta, dict):
+        raise ModelFileError(f"{path}: 'weights' and 'meta' must both be mappings")
+    missing = [k for k in ("W", "b", "A", "B") if k not in weights]
+    missing += [k for k in ("dim", "goal", "substeps", "goal_centred", "nu", "rank") if k not in meta]
+    if missing:
+        raise ModelFileError(f"{path}: missing entries {missing}")
+    d, nu, r = meta["dim"], meta["nu"], meta["rank"]
+    want = {"W": (nu, d), "b": (nu,), "A": (nu + d, r), "B": (nu + d, r)}
+    for name, shape in want.items():
+        arr = weights[name]
+        if not isinstance(arr, np.ndarray) or arr.shape != shape:
+            seen = getattr(arr, "shape", type(arr).__name__)
+            raise ModelFileError(
+                f"{path}: weight {name} has shape {seen}, expected {shape} for dim={d} nu={nu} rank={r}"
+            )
+        if not np.all(np.isfinite(arr)):
+            raise ModelFileError(f"{path}: weight {name} holds non-finite values")
+    if len(meta["goal"]) != d:
+        raise ModelFileError(f"{path}: goal has {len(meta['goal'])} coordinates, expected dim={d}")
+    if not isinstance(meta["substeps"], int) or meta["substeps"] < 1:
+        raise ModelFileError(f"{path}: substeps must be a positive integer, got {meta['substeps']!r}")
+    return weights, meta
+
+
+_DTYPES = {
+    "DoubleStorage": np.float64, "FloatStorage": np.float32, "HalfStorage": np.float16,
+    "LongStorage": np.int64, "IntStorage": np.int32, "ShortStorage": np.int16,
+    "CharStorage": np.int8, "ByteStorage": np.uint8, "BoolStorage": np.bool_,
+}  # fmt: skip
+
+
+class _StorageType:
+    def __init__(self, dtype: type) -> None:
+        self.dtype = np.dtype(dtype)
+
+
+def _rebuild_tensor(storage: np.ndarray, offset: int, size: tuple, stride: tuple, *_: Any) -> np.ndarray:
+    """Mirror of torch._utils._rebuild_tensor_v2 for a flat numpy storage."""
+    if not size:
+        return storage[offset : offset + 1].reshape(()).copy()
+    itemsize = storage.dtype.itemsize
+    span = offset + sum((n - 1) * s for n, s in zip(size, stride, strict=True)) + 1
+    if any(n == 0 for n in size):
+        return np.zeros(size, dtype=storage.dtype)
+    if offset < 0 or span > storage.size:
+        raise ModelFileError(f"tensor of size {size} overruns its storage of {storage.size} elements")
+    view = np.lib.stride_tricks.as_strided(
+        storage[offset:], shape=size, strides=tuple(s * itemsize for s in stride), writeable=False
+    )
+    return np.array(view)
+
+
+class _Unpickler(pickle.Unpickler):
+    """Allow-list unpickler: torch tensors become numpy arrays, nothing else is constructed."""
+
+    def __init__(self, file: io.BytesIO, archive: zipfile.ZipFile, prefix: str) -> None:
+        super().__init__(file)
+        self.archive, self.prefix = archive, prefix
+
+    def find_class(self, module: str, name: str) -> Any:
+        if module == "torch._utils" and name == "_rebuild_tensor_v2":
+            return _rebuild_tensor
+        if module == "torch" and name in _DTYPES:
+            return _StorageType(_DTYPES[name])
+        if module == "collections" and name == "OrderedDict":
+            return collections.OrderedDict
+        raise ModelFileError(f"refusing to load {module}.{name} (not a koopguide model file)")
+
+    def persistent_load(self, pid: Any) -> np.ndarray:
+        if not (isinstance(pid, tuple) and len(pid) == 5 and pid[0] == "storage"):
+            raise ModelFileError(f"unexpected persistent id {pid!r}")
+        _, storage_type, key, _location, numel = pid
+        if not isinstance(storage_type, _StorageType):
+            raise ModelFileError(f"unsupported storage type {storage_type!r}")
+        raw = self.archive.read(f"{self.prefix}data/{key}")
+        dtype = storage_type.dtype.newbyteorder("<")
+        if len(raw) != numel * dtype.itemsize:
+            raise ModelFileError(f"tensor storage {key} holds {len(raw)} bytes, expected {numel * dtype.itemsize}")
+        return np.frombuffer(raw, dtype=dtype)

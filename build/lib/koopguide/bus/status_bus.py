@@ -1,0 +1,247 @@
+"""A daemon's zenoh presence: status publisher, liveliness token and two queryables, one session.
+
+Keys for vehicle ``<id>`` (DESIGN.md, "Zenoh status"):
+
+``koopguide/<id>/status``   publisher; one JSON status per :meth:`StatusBus.publish` (schema: ``status``)
+``koopguide/<id>/alive``    liveliness token, present while the bus is open
+``koopguide/<id>/field``    queryable; the selector's parameters (``?n=30``) go to ``sample_field`` as a
+                            dict of strings, the reply is its result as JSON; a ValueError it raises
+                            becomes an error reply carrying the message
+``koopguide/<id>/config``   queryable; the reply is ``config_snapshot()`` as JSON
+
+Zenoh is optional for guidance: if the session cannot be opened or an entity cannot be declared,
+:meth:`StatusBus.create` logs one warning and returns a disabled bus whose :meth:`publish` does
+nothing. A failing put is logged once per outage, never per cycle.
+
+Threads: no Python callback is handed to zenoh (a callback left declared keeps a thread alive and
+hangs the process at exit). Queries arrive in zenoh ring channels and a task on the event loop
+drains them every :data:`QUERY_POLL_S`. ``config_snapshot`` is cheap and runs on the event loop;
+``sample_field`` (up to 100 x 100 field evaluations and their JSON) runs on a worker thread, one query
+at a time, so a field query never holds up the control loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import zenoh
+
+from koopguide.bus.status import encode_status, validate_vehicle_id
+from koopguide.bus.zenoh_config import load_zenoh_config, zenoh_error_text
+
+__all__ = ["QUERY_POLL_S", "StatusBus", "StatusKeys", "load_zenoh_config"]
+
+logger = logging.getLogger("koopguide.bus.status_bus")
+
+#: Key prefix of everything koopguide publishes.
+APP = "koopguide"
+#: How often the event loop looks for queries [s]: the added latency of a field or config query.
+QUERY_POLL_S = 0.02
+#: Queries waiting beyond this many per queryable are dropped, oldest first (the asker sees no reply).
+QUERY_BACKLOG = 16
+
+SampleField = Callable[[dict[str, str]], dict]
+ConfigSnapshot = Callable[[], dict]
+
+
+@dataclass(frozen=True)
+class StatusKeys:
+    """The four key expressions of one vehicle."""
+
+    status: str
+    alive: str
+    field: str
+    config: str
+
+    @classmethod
+    def for_vehicle(cls, vehicle_id: str) -> StatusKeys:
+        validate_vehicle_id(vehicle_id)
+        return cls(*(f"{APP}/{vehicle_id}/{name}" for name in ("status", "alive", "field", "config")))
+
+
+@dataclass
+class _Declared:
+    session: zenoh.Session
+    publisher: zenoh.Publisher
+    token: zenoh.LivelinessToken
+    field_queryable: zenoh.Queryable
+    config_queryable: zenoh.Queryable
+
+
+class StatusBus:
+    """One zenoh session for one vehicle id. Build with :meth:`create`; close with :meth:`close`."""
+
+    def __init__(
+        self,
+        vehicle_id: str,
+        declared: _Declared | None,
+        sample_field: SampleField,
+        config_snapshot: ConfigSnapshot,
+    ) -> None:
+        self.vehicle_id = vehicle_id
+        self.keys = StatusKeys.for_vehicle(vehicle_id)
+        self._declared = declared
+        self._sample_field = sample_field
+        self._config_snapshot = config_snapshot
+        self._query_task: asyncio.Task[None] | None = None
+        self._put_failing = False
+        #: Puts that raised since the bus opened (each outage is logged once).
+        self.put_failures = 0
+
+    # ------------------------------------------------------------------------------- lifecycle
+    @classmethod
+    async def create(
+        cls,
+        vehicle_id: str,
+        zenoh_config: zenoh.Config,
+        sample_field: SampleField,
+        config_snapshot: ConfigSnapshot,
+    ) -> StatusBus:
+        """Open the session off the event loop and declare everything; disabled (not raised) on failure.
+
+        A malformed ``vehicle_id`` is the caller's error and raises ValueError.
+        """
+        keys = StatusKeys.for_vehicle(vehicle_id)
+        opening = asyncio.ensure_future(asyncio.to_thread(_open_and_declare, zenoh_config, keys))
+        try:
+            declared = await asyncio.shield(opening)
+        except (zenoh.ZError, OSError) as exc:
+            logger.warning(
+                "zenoh status for vehicle %r disabled: %s (guidance continues without status)",
+                vehicle_id,
+                zenoh_error_text(exc),
+            )
+            return cls(vehicle_id, None, sample_field, config_snapshot)
+        except asyncio.CancelledError:
+            opening.add_done_callback(_close_when_opened)  # the thread cannot be stopped; undo it when done
+            raise
+        bus = cls(vehicle_id, declared, sample_field, config_snapshot)
+        bus._query_task = asyncio.create_task(bus._serve_queries(), name=f"zenoh queries {vehicle_id}")
+        logger.debug("zenoh status for vehicle %r on %s", vehicle_id, keys.status)
+        return bus
+
+    @property
+    def enabled(self) -> bool:
+        """True while the session is open and the entities declared."""
+        return self._declared is not None
+
+    async def close(self) -> None:
+        """Stop serving queries, undeclare the token (monitors see the vehicle go) and close the session."""
+        declared, self._declared = self._declared, None
+        task, self._query_task = self._query_task, None
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        if declared is not None:
+            await asyncio.to_thread(_undeclare_and_close, declared)
+
+    async def __aenter__(self) -> StatusBus:
+        return self
+
+    async def __aexit__(self, *_exc: object) -> None:
+        await self.close()
+
+    # --------------------------------------------------------------------------------- publish
+    def publish(self, status: dict[str, Any]) -> None:
+        """Encode and put one status; never blocks. A malformed status raises StatusFormatError (a bug)."""
+        declared = self._declared
+        if declared is None:
+            return
+        payload = encode_status(status)
+        try:
+            declared.publisher.put(payload)
+        except zenoh.ZError as exc:
+            self.put_failures += 1
+            if not self._put_failing:
+                self._put_failing = True
+                logger.warning("zenoh put on %s failed (logged once until it works again): %s",
+                               self.keys.status, zenoh_error_text(exc))
+            return
+        if self._put_failing:
+            self._put_failing = False
+            logger.info("zenoh put on %s works again after %d failures", self.keys.status, self.put_failures)
+
+    # --------------------------------------------------------------------------------- queries
+    async def _serve_queries(self) -> None:
+        while (declared := self._declared) is not None:
+            while (query := declared.field_queryable.try_recv()) is not None:
+                # off the event loop: the answer costs milliseconds of numpy and JSON (cached per grid)
+                await asyncio.to_thread(_reply_and_drop, query, self.keys.field, self._field_reply)
+            while (query := declared.config_queryable.try_recv()) is not None:
+                _reply_and_drop(query, self.keys.config, self._config_reply)
+            await asyncio.sleep(QUERY_POLL_S)
+
+    def _field_reply(self, query: zenoh.Query) -> Any:
+        return self._sample_field(dict(query.parameters))
+
+    def _config_reply(self, _query: zenoh.Query) -> Any:
+        return self._config_snapshot()
+
+
+def _reply_and_drop(query: zenoh.Query, key: str, answer: Callable[[zenoh.Query], Any]) -> None:
+    try:
+        _answer(query, key, answer)
+    except zenoh.ZError as exc:  # the asker left, or the session is closing
+        logger.debug("could not reply to a query on %s: %s", key, zenoh_error_text(exc))
+    finally:
+        query.drop()  # tells the asker that no more replies follow
+
+
+def _answer(query: zenoh.Query, key: str, answer: Callable[[zenoh.Query], Any]) -> None:
+    try:
+        body = answer(query)
+    except ValueError as exc:  # the asker's parameters are wrong: tell them
+        query.reply_err(str(exc), encoding=zenoh.Encoding.TEXT_PLAIN)
+        return
+    except Exception as exc:  # a bug in the daemon's callback: answer, log, keep serving the others
+        logger.exception("answering a query on %s failed", key)
+        query.reply_err(f"internal error: {type(exc).__name__}: {exc}", encoding=zenoh.Encoding.TEXT_PLAIN)
+        return
+    try:
+        payload = json.dumps(body, separators=(",", ":"), allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        logger.error("the reply on %s is not finite JSON: %s", key, exc)
+        query.reply_err(f"internal error: reply is not finite JSON: {exc}", encoding=zenoh.Encoding.TEXT_PLAIN)
+        return
+    query.reply(key, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
+
+
+# ------------------------------------------------------------------------- blocking zenoh calls
+def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys) -> _Declared:
+    """Runs on a worker thread. On any failure, closes what it opened and re-raises."""
+    session = zenoh.open(zenoh_config)
+    try:
+        return _Declared(
+            session=session,
+            publisher=session.declare_publisher(keys.status, encoding=zenoh.Encoding.APPLICATION_JSON),
+            token=session.liveliness().declare_token(keys.alive),
+            field_queryable=session.declare_queryable(keys.field, zenoh.handlers.RingChannel(QUERY_BACKLOG)),
+            config_queryable=session.declare_queryable(keys.config, zenoh.handlers.RingChannel(QUERY_BACKLOG)),
+        )
+    except BaseException:
+        session.close()
+        raise
+
+
+def _undeclare_and_close(declared: _Declared) -> None:
+    try:
+        for entity in (declared.token, declared.field_queryable, declared.config_queryable, declared.publisher):
+            try:
+                entity.undeclare()
+            except zenoh.ZError as exc:
+                logger.debug("undeclaring %s failed: %s", type(entity).__name__, zenoh_error_text(exc))
+    finally:
+        declared.session.close()
+
+
+def _close_when_opened(opening: asyncio.Future[_Declared]) -> None:
+    if opening.cancelled() or opening.exception() is not None:
+        return
+    _undeclare_and_close(opening.result())

@@ -1,0 +1,54 @@
+"""Model coordinates <-> local NED metres (DESIGN.md "Frames", a public contract).
+
+Conventions: model points ``p = (x, y)`` in model units (LASA: x right, y up); local NED points
+``(N, E)`` in metres; velocities likewise per unit time. Three numbers fix the map: ``goal_ned`` (where
+the model's goal lands), ``scale`` (metres per model unit) and ``heading_deg`` (compass heading of model
++x; model +y points 90 degrees counter-clockwise from +x, i.e. at heading - 90 degrees).
+
+    ned = goal_ned + scale * R (p - goal_model),  R = [[cos h, sin h], [sin h, -cos h]]
+
+R's columns are the NED directions of model +x (cos h, sin h) and +y (sin h, -cos h). R is a reflection
+(det -1: NED is left-handed seen from above, model x/y right-handed), symmetric and its own inverse.
+With h = 90 degrees, model +x is East and +y is North.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from koopguide.guidance.settings import FrameSettings
+
+
+@dataclass(frozen=True)
+class ModelFrame:
+    """The placement of a 2-D model in local NED."""
+
+    goal_model: tuple[float, float]  # the field's goal [model units]
+    goal_ned: tuple[float, float]  # [m]
+    scale: float  # metres per model unit
+    heading_deg: float  # compass heading of model +x [deg]
+
+    @classmethod
+    def place(cls, goal_model: np.ndarray, settings: FrameSettings) -> ModelFrame:
+        """The frame of ``settings`` (goal_ned, scale, heading_deg) for a model whose goal is ``goal_model``."""
+        return cls(tuple(float(v) for v in goal_model), settings.goal_ned, settings.scale, settings.heading_deg)
+
+    @property
+    def R(self) -> np.ndarray:
+        h = math.radians(self.heading_deg)
+        return np.array([[math.cos(h), math.sin(h)], [math.sin(h), -math.cos(h)]])
+
+    def to_ned(self, p: np.ndarray) -> np.ndarray:
+        """Model points ``(..., 2)`` -> NED ``(..., 2)`` [m]."""
+        return np.asarray(self.goal_ned) + self.scale * (np.asarray(p) - np.asarray(self.goal_model)) @ self.R.T
+
+    def to_model(self, ned: np.ndarray) -> np.ndarray:
+        """NED ``(..., 2)`` [m] -> model points ``(..., 2)`` (R is its own inverse)."""
+        return np.asarray(self.goal_model) + (np.asarray(ned) - np.asarray(self.goal_ned)) @ self.R.T / self.scale
+
+    def direction_to_ned(self, v: np.ndarray) -> np.ndarray:
+        """Model-frame vectors ``(..., 2)`` -> NED vectors, rotated/reflected only (no scale)."""
+        return np.asarray(v) @ self.R.T

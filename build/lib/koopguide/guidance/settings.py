@@ -1,0 +1,165 @@
+"""The guidance service's typed configuration: frozen dataclasses built from ``config/guidance.yaml``.
+
+Defaults live only in ``config/guidance.yaml`` (``koopguide/defaults/guidance.yaml``); these classes carry
+the types, the units (in the field names) and each number's interval (in its type, checked while
+loading: :mod:`koopguide.base.config`); ``__post_init__`` checks only relations between keys.
+:func:`load` merges defaults, the user's file and command-line overrides and raises
+:class:`koopguide.base.config.ConfigError` naming the key for anything unknown, ill-typed or out of
+range - before the service opens any link.
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+from koopguide.base import config
+from koopguide.base.config import FiniteFloat, Range, check
+
+VEHICLE_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")  # a zenoh key segment: no / * $ # ?
+MAX_RATE_HZ = 50.0
+Rate = Annotated[float, Range(0.0, MAX_RATE_HZ, lo_open=True)]  # [Hz]
+SystemId = Annotated[int, Range(1, 255)]
+ComponentId = Annotated[int, Range(0, 255)]
+Seconds = Annotated[float, Range(0.0, 3600.0, lo_open=True)]  # a positive duration up to an hour [s]
+Speed = Annotated[float, Range(0.0, 20.0)]  # a boat's speed [m/s]
+Distance = Annotated[float, Range(0.0, 1000.0)]  # [m]
+
+
+class ArrivalAction(enum.Enum):
+    LOITER = "loiter"  # the autopilot's LOITER holds position against a current
+    HOLD = "hold"  # the autopilot's HOLD: motors stop (a boat drifts)
+    STATION_KEEP = "station_keep"  # keep steering onto the goal, crabbing into the current
+
+
+class OutsideDomain(enum.Enum):
+    HOLD = "hold"
+    CLAMP = "clamp"
+
+
+class ExitMode(enum.Enum):
+    LOITER = "loiter"
+    HOLD = "hold"
+
+
+@dataclass(frozen=True)
+class MavlinkSettings:
+    endpoint: str
+    target_system: SystemId
+    target_component: ComponentId
+    source_system: SystemId
+    source_component: ComponentId
+    heartbeat_hz: Rate
+    position_rate_hz: Rate
+    link_timeout_s: Seconds
+    reconnect_min_s: Seconds
+    reconnect_max_s: Seconds
+    command_retry_s: Seconds
+
+    def __post_init__(self) -> None:
+        check(self.reconnect_max_s >= self.reconnect_min_s, "mavlink.reconnect_max_s", self.reconnect_max_s,
+              f">= reconnect_min_s ({self.reconnect_min_s})")
+
+
+@dataclass(frozen=True)
+class FrameSettings:
+    goal_ned: tuple[FiniteFloat, FiniteFloat]  # [m]
+    goal_latlon: tuple[Annotated[float, Range(-90.0, 90.0)], Annotated[float, Range(-180.0, 180.0)]] | None  # [deg]
+    scale: Annotated[float, Range(0.0, 1e6, lo_open=True)]  # metres per model unit
+    heading_deg: Annotated[float, Range(-360.0, 360.0)]  # compass heading of model +x
+
+
+@dataclass(frozen=True)
+class CommandSettings:
+    rate_hz: Rate
+    max_speed_mps: Annotated[float, Range(0.0, 20.0, lo_open=True)]
+    min_speed_mps: Speed
+    turn_slowdown: bool
+    current_compensation: bool
+    lookahead_m: Distance
+    with_yaw: bool
+    lead_s: Annotated[float, Range(0.0, 5.0)]
+    domain_margin: Annotated[float, Range(0.0, 10.0)]
+    speed_grid: Annotated[int, Range(8, 512)]
+
+    def __post_init__(self) -> None:
+        check(self.min_speed_mps <= self.max_speed_mps, "command.min_speed_mps", self.min_speed_mps,
+              f"0 .. max_speed_mps ({self.max_speed_mps})")
+
+
+@dataclass(frozen=True)
+class ArrivalSettings:
+    radius_m: Annotated[float, Range(0.0, 1000.0, lo_open=True)]
+    on_arrival: ArrivalAction
+    station_gain: Annotated[float, Range(0.0, 100.0, lo_open=True)]  # [1/s]
+    capture_radius_m: Distance
+    approach_radius_m: Distance
+    facing_deg: Annotated[float, Range(0.0, 90.0, lo_open=True, hi_open=True)]
+    settle_radius_m: Distance
+    settle_timeout_s: Annotated[float, Range(0.0, 3600.0)]
+
+    def __post_init__(self) -> None:
+        check(self.approach_radius_m >= self.radius_m, "arrival.approach_radius_m", self.approach_radius_m,
+              f">= radius_m ({self.radius_m})")
+        check(self.settle_radius_m <= self.radius_m, "arrival.settle_radius_m", self.settle_radius_m,
+              f"0 .. radius_m ({self.radius_m})")
+
+
+@dataclass(frozen=True)
+class EstimatorSettings:
+    position_std_m: Annotated[float, Range(0.0, 100.0, lo_open=True)]
+    velocity_std_mps: Annotated[float, Range(0.0, 100.0, lo_open=True)]
+    accel_std_mps2: Annotated[float, Range(0.0, 100.0, lo_open=True)]
+    gate_chi2: Annotated[float, Range(0.0, 1e6, lo_open=True)]
+    reset_after_rejections: Annotated[int, Range(1, 1000)]
+    max_dt_s: Seconds
+    current_prior_std_mps: Annotated[float, Range(0.0, 20.0, lo_open=True)]
+    current_walk_mps_per_sqrt_s: Annotated[float, Range(0.0, 10.0)]
+    current_max_turn_dps: Annotated[float, Range(0.0, 360.0, lo_open=True)]
+
+
+@dataclass(frozen=True)
+class FailsafeSettings:
+    stale_after_s: Seconds
+    outside_domain: OutsideDomain
+    # ((N_min, N_max), (E_min, E_max)) [m]
+    geofence_ned: tuple[tuple[FiniteFloat, FiniteFloat], tuple[FiniteFloat, FiniteFloat]] | None
+    on_exit: ExitMode
+
+    def __post_init__(self) -> None:
+        if self.geofence_ned is not None:
+            for axis, (lo, hi) in zip("NE", self.geofence_ned, strict=True):
+                check(lo < hi, "failsafe.geofence_ned", self.geofence_ned, f"[min, max] with min < max on {axis}")
+
+
+@dataclass(frozen=True)
+class StatusSettings:
+    rate_hz: Rate
+    field_grid: Annotated[int, Range(2, 200)]
+
+
+@dataclass(frozen=True)
+class GuidanceConfig:
+    vehicle_id: str
+    arm: bool
+    mavlink: MavlinkSettings
+    frame: FrameSettings
+    command: CommandSettings
+    arrival: ArrivalSettings
+    estimator: EstimatorSettings
+    failsafe: FailsafeSettings
+    status: StatusSettings
+
+    def __post_init__(self) -> None:
+        check(bool(VEHICLE_ID.match(self.vehicle_id)), "vehicle_id", self.vehicle_id,
+              "1-64 characters of A-Z a-z 0-9 _ -")
+
+
+def load(user_file: str | Path | None = None, overrides: dict[str, Any] | None = None) -> GuidanceConfig:
+    """Defaults, then ``user_file``, then ``overrides`` (nested like the YAML), checked."""
+    return config.build(GuidanceConfig, config.load_layers("guidance", user_file, overrides or {}))
+
+

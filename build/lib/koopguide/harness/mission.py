@@ -1,0 +1,218 @@
+"""A whole simulated mission: the bundled simulator and the guidance service, meeting over loopback MAVLink.
+
+Used by ``koopguide demo`` and by the end-to-end tests. The simulator runs on its own thread
+(:class:`sitl.runner.SimulationThread`) and sends to the service's listening UDP port; the service runs
+on the caller's event loop, exactly as ``koopguide run`` does. Ground truth comes from the simulator's
+recorder. Conventions: local NED metres, simulated (vehicle) seconds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import socket
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from koopguide.guidance.law.command import GuidanceLaw
+from koopguide.guidance.law.frames import ModelFrame
+from koopguide.guidance.settings import GuidanceConfig
+from koopguide.model.field import FlowField
+
+TANK_M = (4.5, 3.0)  # the paper's tank, N x E [m]
+DEMO_SETTLE_S = 20.0  # simulated seconds the demo keeps watching after arrival
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def demo_start_pose(field_: FlowField, frame: ModelFrame, start: np.ndarray) -> tuple[float, float, float]:
+    """(N, E, heading_deg) at a model point, heading along the field there."""
+    n, e = frame.to_ned(start)
+    vn, ve = frame.direction_to_ned(field_.velocity(start))
+    return float(n), float(e), math.degrees(math.atan2(ve, vn))
+
+
+def tank_around(points_ned: np.ndarray, margin_m: float = 0.6) -> dict[str, list[float]]:
+    """A world box (the paper's tank size when it fits) containing ``points_ned`` with a margin."""
+    lo, hi = points_ned.min(axis=0) - margin_m, points_ned.max(axis=0) + margin_m
+    size = np.maximum(hi - lo, TANK_M)
+    mid = 0.5 * (lo + hi)
+    return {"north_m": [float(mid[0] - size[0] / 2), float(mid[0] + size[0] / 2)],
+            "east_m": [float(mid[1] - size[1] / 2), float(mid[1] + size[1] / 2)]}
+
+
+def sim_overrides(pose: tuple[float, float, float], port: int, world: dict[str, list[float]], speedup: float,
+                  flow: dict[str, Any] | None = None, seed: int = 0) -> dict[str, Any]:
+    """The simulator config for one boat at ``pose`` sending MAVLink to the service on ``port``."""
+    return {"seed": seed, "speedup": speedup, "start_poses": [list(pose)], "world": {"walls": True, **world},
+            "mavlink": {"endpoints": [f"udpout:127.0.0.1:{port}"]},
+            "flow": flow or {"kinds": ["none"]}, "recorder": {"rate_hz": 10.0}}
+
+
+@dataclass
+class MissionResult:
+    arrived: bool
+    arrival_time_s: float | None  # simulated time from the service's first setpoint to arrival
+    arrived_at_s: float | None  # simulated time of arrival (the clock of ``track``)
+    track: np.ndarray  # (T, 3): t, N, E of the true boat [s, m, m]
+    transitions: list[tuple[float, str]]
+    max_setpoint_mps: float
+    final_distance_m: float
+    max_distance_after_arrival_m: float | None
+    mode_before_exit: str | None  # the vehicle's mode when the service began to shut down
+    law: GuidanceLaw  # the service's guidance law (its field, frame and speed gain)
+
+
+async def fly(cfg: GuidanceConfig, model: Path, sim_cfg: Any, timeout_s: float, settle_s: float = 20.0,
+              zenoh_config: Any | None = None, progress: bool = False) -> MissionResult:
+    """Run one mission: until arrival plus ``settle_s`` simulated seconds, or ``timeout_s`` after start."""
+    from koopguide.guidance.daemon import GuidanceDaemon
+    from sitl.runner import SimulationThread
+
+    records: list[dict[str, Any]] = []
+    daemon = await GuidanceDaemon.create(cfg, model, zenoh_config)
+    runner = asyncio.create_task(daemon.run())
+    try:
+        with SimulationThread(sim_cfg, records):
+            t_start = t_arrived = None
+            last_print = -math.inf
+            wall_guard = time.monotonic() + 10.0 + 3.0 * (timeout_s + settle_s) / max(sim_cfg.speedup, 0.5)
+            while time.monotonic() < wall_guard and not runner.done():
+                await asyncio.sleep(0.02)
+                t = daemon.clock.now()
+                if t_start is None and daemon.setpoints_sent > 0:
+                    t_start = t
+                if t_arrived is None and daemon.arrived:
+                    t_arrived = t
+                if progress and t - last_print >= 5.0 and daemon.clock.started:
+                    last_print = t
+                    print_progress(daemon.status())
+                if t_start is not None and t_arrived is None and t - t_start > timeout_s:
+                    break
+                if t_arrived is not None and t - t_arrived >= settle_s:
+                    break
+            daemon.stop()
+            await runner
+    finally:
+        if not runner.done():
+            daemon.stop()
+            await runner
+    return summarize(daemon, records, t_start, t_arrived)
+
+
+def summarize(daemon: Any, records: list[dict[str, Any]], t_start: float | None,
+              t_arrived: float | None) -> MissionResult:
+    states = [r for r in records if r.get("kind") == "state"]
+    track = np.array([[r["t"], r["n"], r["e"]] for r in states]) if states else np.zeros((0, 3))
+    goal = daemon.law.goal_ned
+    dist = np.hypot(track[:, 1] - goal[0], track[:, 2] - goal[1]) if len(track) else np.array([math.inf])
+    after = None
+    if t_arrived is not None and len(track):
+        mask = track[:, 0] >= t_arrived
+        after = float(dist[mask].max()) if mask.any() else None
+    return MissionResult(
+        arrived=t_arrived is not None,
+        arrival_time_s=None if t_arrived is None or t_start is None else t_arrived - t_start,
+        arrived_at_s=t_arrived,
+        track=track, transitions=list(daemon.transitions), max_setpoint_mps=daemon.max_cmd_speed,
+        final_distance_m=float(dist[-1]), max_distance_after_arrival_m=after, law=daemon.law,
+        mode_before_exit=daemon.mode_before_exit,
+    )
+
+
+def print_progress(status: dict[str, Any]) -> None:
+    pos = status["position_ned"]
+    where = f"N {pos[0]:+.2f} E {pos[1]:+.2f} m" if pos else "no position yet"
+    dist = status["distance_to_goal_m"]
+    speed = math.hypot(*status["cmd_velocity_ned"])
+    print(f"  t {status['vehicle_time_s']:6.1f} s  {status['state']:8s} {status['mode'] or '-':7s} {where}  "
+          f"to goal {dist if dist is not None else float('nan'):.2f} m  cmd {speed:.2f} m/s", file=sys.stderr)
+
+
+def mission_at(model: Path, start_model: np.ndarray, speedup: float, flow: dict[str, Any] | None = None,
+               vehicle_id: str = "demo", seed: int = 0, sim_extra: dict[str, Any] | None = None,
+               guidance_extra: dict[str, Any] | None = None) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
+    """The README's mission set-up from any model point: goal at NED (0, 0), 0.04 m per unit, model +x
+    East, 0.3 m/s top speed; the boat starts at ``start_model`` heading along the field, in a tank around
+    the model's domain. ``flow`` is the simulator's ``flow`` section (None: calm water); ``sim_extra`` and
+    ``guidance_extra`` are further overrides of the simulator's and the service's configs."""
+    from koopguide.base import config
+    from koopguide.guidance import settings
+    from koopguide.model.field import load_field
+    from sitl import config as sitl_config
+
+    port = free_udp_port()
+    cfg = settings.load(overrides=config.merge({
+        "vehicle_id": vehicle_id, "arm": True, "mavlink": {"endpoint": f"udp:127.0.0.1:{port}"},
+        "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0}, "command": {"max_speed_mps": 0.3},
+    }, guidance_extra or {}))
+    field_ = load_field(model)
+    frame = ModelFrame.place(field_.goal, cfg.frame)
+    pose = demo_start_pose(field_, frame, np.asarray(start_model, dtype=float))
+    lo, hi = field_.bounds
+    corners = frame.to_ned(np.array([lo, hi, [lo[0], hi[1]], [hi[0], lo[1]]]))
+    world = tank_around(np.vstack([corners, [pose[:2]]]))
+    overrides = config.merge(sim_overrides(pose, port, world, speedup, flow, seed), sim_extra or {})
+    return cfg, sitl_config.load(overrides=overrides), pose
+
+
+def demo_mission(model: Path, start_index: int, current_mps: float, speedup: float, vehicle_id: str = "demo",
+                 seed: int = 0) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
+    """The README's mission from a Zshape demo start, in a uniform current toward the north (across the
+    field's final leg)."""
+    from koopguide.base import data
+
+    starts = data.load_lasa("Zshape").trajectories
+    if not 0 <= start_index < len(starts):
+        raise ValueError(f"--start must be 0 .. {len(starts) - 1}, got {start_index}")
+    flow = {"kinds": ["uniform"], "uniform": {"speed_mps": current_mps, "direction_deg": 0.0}} if current_mps else None
+    return mission_at(model, starts[start_index][0], speedup, flow, vehicle_id, seed)
+
+
+def run_demo(args: Any) -> int:
+    """``koopguide demo``: train Zshape if no cached model, fly the mission in the simulator, plot it."""
+    import logging
+
+    from koopguide.base import data
+    from koopguide.bus.zenoh_config import load_zenoh_config
+    from koopguide.harness.mission_plot import plot_mission
+    from koopguide.model.learn.export import train_to_file
+    from sitl.flow import Flow
+
+    if args.speedup <= 0:
+        raise ValueError(f"--speedup must be > 0, got {args.speedup}")
+    zenoh_config = load_zenoh_config(args.zenoh_config)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    args.out.mkdir(parents=True, exist_ok=True)
+    model = args.out / "zshape.pt"
+    if not model.is_file():
+        print(f"koopguide demo: no cached model; training Zshape into {model}", file=sys.stderr)
+        train_to_file(data.load_lasa("Zshape"), model, seed=0)
+    cfg, sim_cfg, pose = demo_mission(model, args.start, args.current_mps, args.speedup)
+    print(f"koopguide demo: boat at N {pose[0]:.2f} E {pose[1]:.2f} m heading {pose[2]:.0f} deg, goal N 0 E 0, "
+          f"current {args.current_mps:.2f} m/s toward north, simulator x{args.speedup:g}; "
+          f"status on zenoh koopguide/{cfg.vehicle_id}/status (watch: koopguide monitor)", file=sys.stderr)
+    result = asyncio.run(fly(cfg, model, sim_cfg, args.timeout_s, settle_s=DEMO_SETTLE_S,
+                             zenoh_config=zenoh_config, progress=True))
+    world = sim_cfg.world
+    box = np.array([[world.north_m[0], world.east_m[0]], [world.north_m[1], world.east_m[1]]])
+    flow = Flow(sim_cfg.flow, np.random.default_rng(0))
+    png = args.out / "demo.png"
+    verdict = (f"arrived in {result.arrival_time_s:.1f} s" if result.arrived
+               else f"did not arrive within {args.timeout_s:g} s")
+    plot_mission(png, result.law.field_velocity_ned, box, result.track, pose[:2], cfg.frame.goal_ned,
+                 cfg.arrival.radius_m, lambda n, e: flow.velocity(n, e, 0.0), f"koopguide demo: Zshape, {verdict}")
+    after = result.max_distance_after_arrival_m
+    print(f"koopguide demo: {verdict}; largest setpoint {result.max_setpoint_mps:.3f} m/s"
+          + (f"; within {after:.2f} m of the goal for {DEMO_SETTLE_S:.0f} s after arrival" if after is not None else "")
+          + f"; wrote {png}", file=sys.stderr)
+    return 0 if result.arrived else 1

@@ -1,0 +1,271 @@
+"""What a boat does with the MAVLink messages it receives, and how it answers (like ArduPilot Rover).
+
+A ``Channel`` is one boat on one link: replies (COMMAND_ACK, PARAM_VALUE, requested messages) go back
+on the channel a request came in on. Messages addressed to another system (target_system not 0 and not
+this boat) or another component are ignored. Setpoints are honoured only in GUIDED while armed.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from koopguide.base.geodesy import geodetic_to_ned
+from sitl.autopilot import (
+    MODE_NUMBERS,
+    Frame,
+    MavResult,
+    SetpointRejected,
+    Severity,
+    interpret_position_target,
+)
+from sitl.boat import Boat
+from sitl.config import OriginConfig
+from sitl.mavlink_endpoint import Link
+from sitl.telemetry import StreamSchedule, TelemetryWriter
+
+log = logging.getLogger(__name__)
+
+FORCE_ARM_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2 that skips pre-arm checks
+REJECTION_TEXT_INTERVAL_S = 1.0  # at most one "setpoint ignored" STATUSTEXT per second per boat
+GLOBAL_INT_FRAMES = frozenset({Frame.GLOBAL_INT, Frame.GLOBAL_RELATIVE_ALT_INT, Frame.GLOBAL_TERRAIN_ALT_INT})
+
+
+@dataclass
+class Channel:
+    boat: Boat
+    link: Link
+    writer: TelemetryWriter
+    schedule: StreamSchedule
+    origin: OriginConfig
+    publish: Callable[[], None]  # sends queued STATUSTEXTs on all links (they precede an ACK)
+    last_rejection_text_t: float = field(default=-math.inf)
+
+    def send_due(self) -> None:
+        """Send this link's messages that are due now (simulated time)."""
+        for msg_id in self.schedule.due(self.boat.t):
+            self.writer.senders[msg_id]()
+
+
+def addressed_to(msg: Any, sysid: int) -> bool:
+    """True unless the message names another system or a component other than the autopilot."""
+    target_system = getattr(msg, "target_system", 0)
+    if target_system not in (0, sysid):
+        return False
+    return getattr(msg, "target_component", 0) in (0, mavlink.MAV_COMP_ID_AUTOPILOT1)
+
+
+def handle(channel: Channel, msg: Any) -> None:
+    """Act on one decoded message for this channel's boat."""
+    if not addressed_to(msg, channel.boat.sysid):
+        return
+    handler = HANDLERS.get(msg.get_type())
+    if handler is not None:
+        handler(channel, msg)
+
+
+# ---- commands ----------------------------------------------------------------------------------------
+def _command(channel: Channel, msg: Any) -> None:
+    boat = channel.boat
+    command = msg.command
+    result = _run_command(channel, command, msg)
+    channel.publish()
+    channel.writer.mav.command_ack_send(
+        command, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+    )
+    # requested messages go out after the ACK, as ArduPilot does
+    if result == MavResult.ACCEPTED:
+        requested = _requested_message(command, msg)
+        if requested is not None:
+            channel.writer.senders[requested]()
+    log.debug("boat %d: command %d -> %s", boat.sysid, command, MavResult(result).name)
+
+
+def _requested_message(command: int, msg: Any) -> int | None:
+    if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
+        return int(msg.param1)
+    if command == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+        return mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+    if command == mavlink.MAV_CMD_GET_HOME_POSITION:
+        return mavlink.MAVLINK_MSG_ID_HOME_POSITION
+    return None
+
+
+def _run_command(channel: Channel, command: int, msg: Any) -> MavResult:
+    boat = channel.boat
+    ap = boat.autopilot
+    nav = boat.navigation()
+    if command == mavlink.MAV_CMD_DO_SET_MODE:
+        if not int(msg.param1) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return MavResult.UNSUPPORTED
+        return ap.set_mode(int(msg.param2), nav)
+    if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+        if msg.param1 not in (0.0, 1.0):
+            return MavResult.DENIED
+        return ap.arm(msg.param1 == 1.0, int(msg.param2) == FORCE_ARM_MAGIC, nav)
+    if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+        return ap.set_mode(MODE_NUMBERS["RTL"], nav)
+    if command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+        msg_id = int(msg.param1)
+        if msg_id not in channel.writer.senders:
+            return MavResult.UNSUPPORTED
+        interval_us = msg.param2
+        interval = None if interval_us == 0 else (0.0 if interval_us < 0 else interval_us / 1e6)
+        channel.schedule.set_interval(msg_id, interval, boat.t)
+        return MavResult.ACCEPTED
+    if command == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
+        msg_id = int(msg.param1)
+        if msg_id not in channel.writer.senders:
+            return MavResult.UNSUPPORTED
+        interval = channel.schedule.intervals.get(msg_id, 0.0)
+        channel.writer.mav.message_interval_send(msg_id, round(interval * 1e6) if interval > 0 else -1)
+        return MavResult.ACCEPTED
+    if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
+        return MavResult.ACCEPTED if int(msg.param1) in channel.writer.senders else MavResult.UNSUPPORTED
+    if command in (mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, mavlink.MAV_CMD_GET_HOME_POSITION):
+        return MavResult.ACCEPTED
+    if command == mavlink.MAV_CMD_DO_SET_HOME:
+        if msg.param1 == 1.0:
+            if not nav.position_ok:
+                return MavResult.FAILED
+            ap.set_home(nav.n, nav.e)
+        else:
+            lat, lon = (
+                (msg.x / 1e7, msg.y / 1e7) if msg.get_type() == "COMMAND_INT" else (msg.param5, msg.param6)
+            )
+            ap.set_home(*geodetic_to_ned(lat, lon, channel.origin.latitude_deg, channel.origin.longitude_deg))
+        return MavResult.ACCEPTED
+    return MavResult.UNSUPPORTED
+
+
+def _set_mode(channel: Channel, msg: Any) -> None:
+    boat = channel.boat
+    if msg.base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        result = boat.autopilot.set_mode(msg.custom_mode, boat.navigation())
+    else:
+        result = MavResult.UNSUPPORTED
+    channel.publish()
+    # ArduPilot acknowledges SET_MODE with a COMMAND_ACK whose command is the message id (11)
+    channel.writer.mav.command_ack_send(
+        mavlink.MAVLINK_MSG_ID_SET_MODE, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+    )
+
+
+# ---- setpoints ---------------------------------------------------------------------------------------
+def _position_target_local(channel: Channel, msg: Any) -> None:
+    _apply_setpoint(channel, msg, msg.coordinate_frame, (msg.x, msg.y))
+
+
+def _position_target_global(channel: Channel, msg: Any) -> None:
+    if msg.coordinate_frame not in GLOBAL_INT_FRAMES:
+        _reject(
+            channel, f"SET_POSITION_TARGET_GLOBAL_INT frame {msg.coordinate_frame} not supported, ignored"
+        )
+        return
+    origin = channel.origin
+    n, e = geodetic_to_ned(msg.lat_int / 1e7, msg.lon_int / 1e7, origin.latitude_deg, origin.longitude_deg)
+    _apply_setpoint(channel, msg, Frame.LOCAL_NED, (n, e))
+
+
+def _apply_setpoint(channel: Channel, msg: Any, frame: int, position: tuple[float, float]) -> None:
+    boat = channel.boat
+    ap = boat.autopilot
+    if ap.mode != MODE_NUMBERS["GUIDED"] or not ap.armed:
+        return  # ArduPilot ignores setpoints outside GUIDED; a disarmed boat does not move
+    nav = boat.navigation()
+    try:
+        target = interpret_position_target(
+            msg.type_mask,
+            frame,
+            position,
+            (msg.vx, msg.vy),
+            msg.yaw,
+            msg.yaw_rate,
+            nav,
+            ap.params.get("WP_SPEED"),
+        )
+    except SetpointRejected as exc:
+        _reject(channel, str(exc))
+        return
+    ap.set_guided_target(target, boat.t)
+
+
+def _reject(channel: Channel, text: str) -> None:
+    boat = channel.boat
+    if boat.t - channel.last_rejection_text_t >= REJECTION_TEXT_INTERVAL_S:
+        channel.last_rejection_text_t = boat.t
+        boat.autopilot.say(Severity.WARNING, text)
+    log.debug("boat %d: %s", boat.sysid, text)
+
+
+# ---- parameters, streams, time ----------------------------------------------------------------------
+def _param_value(channel: Channel, name: str) -> None:
+    params = channel.boat.autopilot.params
+    channel.writer.mav.param_value_send(
+        name.encode("ascii"),
+        params.get(name),
+        mavlink.MAV_PARAM_TYPE_REAL32,
+        len(params.names),
+        params.names.index(name),
+    )
+
+
+def _param_request_list(channel: Channel, msg: Any) -> None:
+    for name in channel.boat.autopilot.params.names:
+        _param_value(channel, name)
+
+
+def _param_request_read(channel: Channel, msg: Any) -> None:
+    names = channel.boat.autopilot.params.names
+    if msg.param_index >= 0:
+        if msg.param_index < len(names):
+            _param_value(channel, names[msg.param_index])
+        return
+    name = _param_name(msg.param_id)
+    if name in names:
+        _param_value(channel, name)
+
+
+def _param_set(channel: Channel, msg: Any) -> None:
+    name = _param_name(msg.param_id)
+    params = channel.boat.autopilot.params
+    if name not in params:
+        log.debug("boat %d: PARAM_SET of unknown %r ignored", channel.boat.sysid, name)
+        return
+    params.set(name, float(msg.param_value))
+    _param_value(channel, name)  # the value now in force (unchanged if the new one was not finite)
+
+
+def _param_name(param_id: str | bytes) -> str:
+    if isinstance(param_id, bytes):
+        param_id = param_id.decode("ascii", "replace")
+    return param_id.rstrip("\x00")
+
+
+def _request_data_stream(channel: Channel, msg: Any) -> None:
+    rate = float(msg.req_message_rate) if msg.start_stop else 0.0
+    channel.schedule.set_group_rate(msg.req_stream_id, rate, channel.boat.t)
+
+
+def _timesync(channel: Channel, msg: Any) -> None:
+    if msg.tc1 == 0:  # a request: answer with our (simulated) clock in ns
+        channel.writer.mav.timesync_send(round(channel.boat.t * 1e9), msg.ts1)
+
+
+HANDLERS = {
+    "COMMAND_LONG": _command,
+    "COMMAND_INT": _command,
+    "SET_MODE": _set_mode,
+    "SET_POSITION_TARGET_LOCAL_NED": _position_target_local,
+    "SET_POSITION_TARGET_GLOBAL_INT": _position_target_global,
+    "PARAM_REQUEST_LIST": _param_request_list,
+    "PARAM_REQUEST_READ": _param_request_read,
+    "PARAM_SET": _param_set,
+    "REQUEST_DATA_STREAM": _request_data_stream,
+    "TIMESYNC": _timesync,
+}
