@@ -21,6 +21,6 @@ fi
 demo_dir="$work/empty"
 mkdir "$demo_dir"
 cd "$demo_dir"
-"$work/venv/bin/koopguide" demo --speedup 20
+"$work/venv/bin/koopguide" demo
 test -s out/demo.png
 echo "check_wheel: the installed wheel ran koopguide demo in an empty folder"
