@@ -1,5 +1,0 @@
-import sys
-
-from koopguide.cli import main
-
-sys.exit(main())
