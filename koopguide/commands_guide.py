@@ -20,6 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="steer a vehicle along a learned field over MAVLink (the guidance service)")
     p.add_argument("--model", required=True, type=Path, help="trained model file (.pt)")
     p.add_argument("--mavlink", metavar="ENDPOINT", help="udp:HOST:PORT (listen), udpout:, tcp:, tcpin: or DEVICE,BAUD")
+    p.add_argument("--signing-key", metavar="FILE", type=Path,
+                   help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters (docs/mavlink.md)")
     add_guidance_flags(p)
     p.set_defaults(run=cmd_run)
 
@@ -64,6 +66,8 @@ def overrides_from(args: argparse.Namespace) -> dict[str, Any]:
     frame: dict[str, Any] = {}
     if getattr(args, "mavlink", None):
         out["mavlink"] = {"endpoint": args.mavlink}
+    if getattr(args, "signing_key", None) is not None:
+        out.setdefault("mavlink", {})["signing_key"] = str(args.signing_key)
     if args.vehicle_id is not None:
         out["vehicle_id"] = args.vehicle_id
     if args.arm:
@@ -90,11 +94,11 @@ def setup_logging(verbose: bool) -> None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from koopguide.guidance import settings
-    from koopguide.guidance.link import Endpoint
+    from koopguide.guidance.link import link_settings
     from koopguide.guidance.zenoh_config import load_zenoh_config
 
     cfg = settings.load(args.config, overrides_from(args))
-    Endpoint.parse(cfg.mavlink.endpoint)  # a bad endpoint is refused with the config's other errors
+    link_settings(cfg.mavlink)  # a bad endpoint or signing key is refused with the config's other errors
     if not args.model.is_file():
         raise ConfigError(f"model file {args.model} not found")
     zenoh_config = load_zenoh_config(args.zenoh_config)

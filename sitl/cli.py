@@ -42,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="udpout:HOST:PORT, udpin:HOST:PORT, tcpin:HOST:PORT or tcp:HOST:PORT; repeatable "
         "(default udpout:127.0.0.1:14550)",
     )
+    parser.add_argument(
+        "--signing-key", metavar="FILE", help="MAVLink 2 signing key: 32 raw bytes or 64 hex characters"
+    )
     parser.add_argument("--speedup", metavar="X", type=speedup_value, help="simulated s per wall s, or 'max'")
     parser.add_argument(
         "--flow", metavar="KIND", help="none, uniform, vortex, double_gyre, gusts; comma-separated to sum"
@@ -58,6 +61,8 @@ def overrides(args: argparse.Namespace) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if args.mavlink:
         out["mavlink"] = {"endpoints": list(args.mavlink)}
+    if args.signing_key is not None:
+        out.setdefault("mavlink", {})["signing_key"] = args.signing_key
     if args.speedup is not None:
         out["speedup"] = args.speedup
     if args.flow is not None:
@@ -111,8 +116,9 @@ async def serve(cfg: SitlConfig) -> int:
         for link in sim.links:
             s = link.stats
             print(
-                f"sitl: {link.endpoint}: in {s.messages_in} msgs, out {s.messages_out} msgs, "
-                f"garbage {s.garbage_bytes} bytes in {s.bad_messages} runs",
+                f"sitl: {link.endpoint}: in {s.received} msgs, out {s.sent} msgs, "
+                f"garbage {s.garbage_bytes} bytes in {s.corrupt} runs, "
+                f"dropped {s.unsigned} unsigned and {s.bad_signature} badly signed",
                 flush=True,
             )
     return 0

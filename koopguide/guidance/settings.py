@@ -51,6 +51,7 @@ class MavlinkSettings:
     reconnect_min_s: float
     reconnect_max_s: float
     command_retry_s: float
+    signing_key: Path | None  # MAVLink 2 signing key file (docs/mavlink.md); null: unsigned, trust the link
 
     def __post_init__(self) -> None:
         for name in ("target_system", "source_system"):
