@@ -68,7 +68,8 @@ class LinkSettings:
 
     def __post_init__(self) -> None:
         checks = [
-            (len(self.sources) >= 1, "sources", self.sources, "at least one (system, component)"),
+            (len(self.sources) >= 1 and all(len(ids) == 2 and all(0 <= i <= 255 for i in ids) for ids in self.sources),
+             "sources", self.sources, "one or more (system, component) pairs of 0 .. 255"),
             (0 <= self.link_id <= 255, "link_id", self.link_id, "0 .. 255"),
             (self.max_peers >= 1, "max_peers", self.max_peers, ">= 1"),
             (self.max_parsers >= 1, "max_parsers", self.max_parsers, ">= 1"),
