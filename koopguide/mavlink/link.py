@@ -29,9 +29,7 @@ import contextlib
 import errno
 import logging
 import os
-import termios
 import time
-import tty
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
@@ -40,6 +38,7 @@ from typing import Any
 from koopguide.mavlink.endpoint import SERIAL, TCP_IN, TCP_OUT, UDP_IN, UDP_OUT, Endpoint, EndpointError
 from koopguide.mavlink.intake import Intake, LinkStats
 from koopguide.mavlink.rover import is_autopilot_heartbeat
+from koopguide.mavlink.serial_port import open_serial
 from koopguide.mavlink.signing import SignatureCheck, SigningKey
 from koopguide.mavlink.wire import Encoder
 
@@ -139,7 +138,7 @@ class Link:
         elif ep.kind == TCP_OUT:
             await loop.create_connection(lambda: _Stream(self), ep.host, ep.port)
         else:
-            self._serial_fd = _open_serial(ep)
+            self._serial_fd = open_serial(ep)
             loop.add_reader(self._serial_fd, self._serial_readable)
         log.info("MAVLink %s open", ep.with_port(self.local_address[1]) if ep.listens else ep)
 
@@ -377,20 +376,6 @@ class _Stream(asyncio.Protocol):
             link._lost(str(exc) if exc else "closed by the other end")
         else:
             log.info("MAVLink %s: %s disconnected", link.endpoint, _name(self.peer))
-
-
-def _open_serial(ep: Endpoint) -> int:
-    """Open a serial device raw, non-blocking, at the endpoint's baud; OSError when it cannot."""
-    fd = os.open(ep.host, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-    try:
-        tty.setraw(fd)
-        attrs = termios.tcgetattr(fd)
-        attrs[4] = attrs[5] = getattr(termios, f"B{ep.baud}")
-        termios.tcsetattr(fd, termios.TCSANOW, attrs)
-    except (termios.error, AttributeError) as exc:
-        os.close(fd)
-        raise OSError(errno.ENOTTY, f"not a usable serial device ({exc})") from None
-    return fd
 
 
 def _open_error(ep: Endpoint, exc: OSError) -> str:

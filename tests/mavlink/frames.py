@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from koopguide.mavlink.signing import configure_encoder, SigningKey
+from koopguide.mavlink.signing import SigningKey, configure_encoder
 from koopguide.mavlink.wire import mavlink
 
 
