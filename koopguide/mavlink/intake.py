@@ -42,6 +42,7 @@ class LinkStats:
     foreign: int = 0  # valid messages from a system/component other than the one this link serves
     unsigned: int = 0  # signing on: frames without a signature, dropped
     bad_signature: int = 0  # signing on: wrong signature, replayed or stale timestamp, dropped
+    before_heartbeat: int = 0  # the vehicle's ids before an autopilot HEARTBEAT located it (listening), dropped
     wrong_source: int = 0  # the vehicle's ids from an address other than the vehicle's (pinned) one, dropped
     source_changes: int = 0  # the vehicle's address changed (a new address took over)
     peers_dropped: int = 0  # listening endpoints: peers no longer sent to (the peer bound was reached)

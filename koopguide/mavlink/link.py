@@ -207,6 +207,9 @@ class Link:
         if self.endpoint.listens:
             if s.vehicle is not None:
                 if source != self.pinned and not self._take_over(source, msg):
+                    if self.pinned is None:
+                        st.before_heartbeat += 1
+                        return
                     st.wrong_source += 1
                     self._report(f"{msg.get_type()} as the vehicle from {_name(source)} dropped "
                                  f"(the vehicle is at {_name(self.pinned)})")  # fmt: skip

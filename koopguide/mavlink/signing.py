@@ -67,16 +67,18 @@ class SigningKey:
             mode = path.stat().st_mode
         except OSError as exc:
             raise SigningKeyError(f"signing key {path}: cannot read ({exc.strerror or exc})") from None
-        if mode & (stat.S_IRWXG | stat.S_IRWXO):
-            log.warning("signing key %s is readable by other users (mode %o); chmod 600 it", path, mode & 0o777)
         text = data.strip()
         if len(text) == 2 * KEY_BYTES and all(chr(c) in string.hexdigits for c in text):
-            return cls(bytes.fromhex(text.decode("ascii")), str(path))
-        if len(data) == KEY_BYTES:
-            return cls(data, str(path))
-        raise SigningKeyError(
-            f"signing key {path}: {len(data)} bytes; expected 32 raw bytes or 64 hexadecimal characters"
-        )
+            key = cls(bytes.fromhex(text.decode("ascii")), str(path))
+        elif len(data) == KEY_BYTES:
+            key = cls(data, str(path))
+        else:
+            raise SigningKeyError(
+                f"signing key {path}: {len(data)} bytes; expected 32 raw bytes or 64 hexadecimal characters"
+            )
+        if mode & (stat.S_IRWXG | stat.S_IRWXO):
+            log.warning("signing key %s is readable by other users (mode %o); chmod 600 it", path, mode & 0o777)
+        return key
 
     @property
     def fingerprint(self) -> str:

@@ -17,6 +17,7 @@ from koopguide.mavlink import rover
 from koopguide.mavlink.endpoint import Endpoint, EndpointError
 from koopguide.mavlink.link import Link, LinkSettings
 from koopguide.mavlink.signing import SigningKey
+from koopguide.mavlink.wire import mavlink
 
 from .frames import encoder, frame, local_position, vehicle_heartbeat
 
@@ -223,7 +224,7 @@ def test_with_a_key_only_signed_frames_pass_and_everything_sent_is_signed() -> N
             assert link.send(rover.set_mode(VEHICLE, rover.HOLD))
             await asyncio.sleep(0.05)
             (data,) = drain(vehicle)
-            checker = mavutil.mavlink.MAVLink(None)
+            checker = mavlink.MAVLink(None)
             checker.signing.secret_key = KEY.secret
             (msg,) = checker.parse_buffer(data)
             assert msg.get_type() == "COMMAND_LONG" and msg.get_signed() and msg.param2 == rover.HOLD
@@ -267,7 +268,7 @@ def test_tcp_client_and_server_and_a_serial_pty_carry_messages() -> None:
             assert serial.send(rover.set_mode(VEHICLE, rover.GUIDED))
             os.set_blocking(master, False)
             await asyncio.sleep(0.05)
-            (msg,) = mavutil.mavlink.MAVLink(None).parse_buffer(os.read(master, 4096))
+            (msg,) = mavlink.MAVLink(None).parse_buffer(os.read(master, 4096))
             assert msg.get_type() == "COMMAND_LONG" and msg.param2 == rover.GUIDED
             os.write(master, frame(encoder(*VEHICLE), local_position(7, 0.5, 0.25)))
             await until(lambda: serial.stats.received == 1)
