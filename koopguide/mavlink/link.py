@@ -5,20 +5,12 @@ what arrives per source (:mod:`koopguide.mavlink.intake`), hands trusted message
 frames what is sent with one :class:`~koopguide.mavlink.wire.Encoder` per own (system, component) id.
 Both the guidance service and the simulator use it; everything runs on the loop's thread.
 
-Trust (docs/mavlink.md "Security"):
-
-* With a signing key, only correctly signed frames are accepted and everything sent is signed.
-* ``vehicle`` set (the service): messages from any other (system, component) are dropped as foreign.
-  On a listening endpoint the link locks onto the address that sent the vehicle's first autopilot
-  HEARTBEAT; the vehicle's ids from any other address are dropped (``wrong_source``) until the pinned
-  address has been silent for ``repin_after_s`` (a rebooted vehicle may come back from a new port) or a
-  correctly signed HEARTBEAT arrives from the new address; a change is logged and counted. It sends to
-  the pinned address only.
-* ``vehicle`` unset (the simulator): on udpin it answers the ``max_peers`` most recently heard addresses
-  that sent a trusted message - never an address that sent only garbage.
-* The port is exclusive: the UDP socket is bound without SO_REUSEADDR, so a second process on the same
-  port fails with an EndpointError instead of stealing datagrams.
-
+Trust (docs/mavlink.md "Security"): with a signing key only correctly signed frames pass and all that
+is sent is signed. With ``vehicle`` set (the service), other (system, component) ids are foreign; a
+listening endpoint locks onto the address of the vehicle's first autopilot HEARTBEAT, drops the vehicle's
+ids from other addresses (``wrong_source``) until the pinned one is silent for ``repin_after_s`` or a
+signed HEARTBEAT arrives, and sends to the pinned address only. Without ``vehicle`` (the simulator) udpin
+answers the ``max_peers`` most recent addresses that sent trusted messages. UDP ports are exclusive.
 A stream link (tcp client, serial) that closes is reopened with exponential back-off.
 """
 
@@ -29,12 +21,14 @@ import contextlib
 import errno
 import logging
 import os
+import socket
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from typing import Any
 
+from koopguide.mavlink.datagram import MAX_DATAGRAM_BYTES, MAX_DATAGRAMS_PER_WAKE, open_udp
 from koopguide.mavlink.endpoint import SERIAL, TCP_IN, TCP_OUT, UDP_IN, UDP_OUT, Endpoint, EndpointError
 from koopguide.mavlink.intake import Intake, LinkStats
 from koopguide.mavlink.rover import is_autopilot_heartbeat
@@ -98,7 +92,7 @@ class Link:
         self.pinned: Hashable | None = None  # the vehicle's address (listening endpoints with ``vehicle``)
         self._pinned_heard = -float("inf")
         self._peers: OrderedDict[Hashable, None] = OrderedDict()  # udpin without ``vehicle``: who we answer
-        self._udp: asyncio.DatagramTransport | None = None
+        self._udp: socket.socket | None = None
         self._server: asyncio.Server | None = None
         self._clients: dict[Hashable, asyncio.Transport] = {}  # tcpin: connections; tcp: the one
         self._serial_fd: int | None = None
@@ -129,9 +123,9 @@ class Link:
         loop = asyncio.get_running_loop()
         ep = self.endpoint
         if ep.kind in (UDP_IN, UDP_OUT):
-            where = {"local_addr": (ep.host, ep.port)} if ep.kind == UDP_IN else {"remote_addr": (ep.host, ep.port)}
-            self._udp, _ = await loop.create_datagram_endpoint(lambda: _Datagrams(self), **where)  # no SO_REUSEADDR
-            self.local_address = self._udp.get_extra_info("sockname")[:2]
+            self._udp = await open_udp(ep)  # no SO_REUSEADDR: the port is ours alone
+            self.local_address = self._udp.getsockname()[:2]
+            loop.add_reader(self._udp.fileno(), self._udp_readable)
         elif ep.kind == TCP_IN:
             self._server = await loop.create_server(lambda: _Stream(self), ep.host, ep.port)
             self.local_address = self._server.sockets[0].getsockname()[:2]
@@ -182,7 +176,9 @@ class Link:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._reopen
         if self._udp is not None:
+            asyncio.get_running_loop().remove_reader(self._udp.fileno())
             self._udp.close()
+            self._udp = None
         for transport in list(self._clients.values()):
             transport.close()
         if self._server is not None:
@@ -251,6 +247,19 @@ class Link:
             self._peers.popitem(last=False)
             self.stats.peers_dropped += 1
 
+    def _udp_readable(self) -> None:
+        for _ in range(MAX_DATAGRAMS_PER_WAKE):
+            if self._udp is None:
+                return
+            try:
+                data, addr = self._udp.recvfrom(MAX_DATAGRAM_BYTES)
+            except BlockingIOError:
+                return
+            except OSError:  # an ICMP error for an earlier send (udpout with nobody listening)
+                self.stats.send_errors += 1
+                continue
+            self.received(addr[:2], data, datagram=True)
+
     def _serial_readable(self) -> None:
         try:
             data = os.read(self._serial_fd, SERIAL_READ_BYTES) if self._serial_fd is not None else b""
@@ -311,10 +320,17 @@ class Link:
         st = self.stats
         if self._udp is not None:
             for peer in peers:
-                if self.endpoint.kind == UDP_OUT:
-                    self._udp.sendto(frame)
-                else:
-                    self._udp.sendto(frame, peer)
+                try:
+                    if self.endpoint.kind == UDP_OUT:
+                        self._udp.send(frame)
+                    else:
+                        self._udp.sendto(frame, peer)
+                except BlockingIOError:
+                    st.dropped_out += 1
+                    continue
+                except OSError:  # e.g. nobody listening on a udpout port (ICMP port unreachable)
+                    st.send_errors += 1
+                    continue
                 st.bytes_out += len(frame)
         elif self._serial_fd is not None:
             try:
@@ -339,17 +355,6 @@ class Link:
                 transport.write(frame)
                 st.bytes_out += len(frame)
         st.sent += 1
-
-
-class _Datagrams(asyncio.DatagramProtocol):
-    def __init__(self, link: Link) -> None:
-        self.link = link
-
-    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
-        self.link.received(addr[:2], data, datagram=True)
-
-    def error_received(self, exc: Exception) -> None:
-        self.link.stats.send_errors += 1
 
 
 class _Stream(asyncio.Protocol):
