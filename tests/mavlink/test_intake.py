@@ -1,4 +1,5 @@
-"""The MAVLink intake under garbage: per-source parsers, datagrams parsed afresh, fuzzing (hypothesis)."""
+"""The MAVLink intake under garbage: per-source parsers, datagrams parsed afresh, and fuzzing (hypothesis) of
+the intake and of a service link's whole receive path."""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ import os
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from koopguide.mavlink.endpoint import Endpoint
 from koopguide.mavlink.intake import Intake, LinkStats
+from koopguide.mavlink.link import Link, LinkSettings
 from koopguide.mavlink.signing import SignatureCheck, SigningKey
 
 from .frames import encoder, frame, local_position, vehicle_heartbeat
@@ -93,3 +96,41 @@ def test_signed_intake_drops_and_counts_unsigned_and_foreign_keyed_frames() -> N
     good = taken.feed("a", frame(encoder(key=KEY), vehicle_heartbeat()), datagram=True)
     assert len(good) == 1 and good[0].get_signed()
     assert (taken.stats.unsigned, taken.stats.bad_signature) == (1, 1)
+
+
+VEHICLE_ADDR, ATTACKER_ADDR = ("127.0.0.1", 40001), ("127.0.0.1", 40002)
+step = st.tuples(
+    st.sampled_from([VEHICLE_ADDR, ATTACKER_ADDR]),
+    st.one_of(st.binary(max_size=300), st.just(HEADER_FLOOD), st.sampled_from(["position", "heartbeat"])),
+    st.booleans(),
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(step, max_size=40))
+def test_the_service_transport_never_raises_and_never_believes_another_address(steps: list) -> None:
+    """Random bytes, header garbage and valid frames from two addresses into a service link: the vehicle's
+    datagrams all arrive, nothing from the other address is believed, nothing raises."""
+    got: list = []
+    settings_ = LinkSettings(Endpoint.parse("udpin:127.0.0.1:0"), ((255, 191),), vehicle=(1, 1))
+    link = Link(settings_, lambda _link, msg, _arrived: got.append(msg))
+    real, fake = encoder(1, 1), encoder(1, 1)
+    link.received(VEHICLE_ADDR, frame(real, vehicle_heartbeat()), datagram=True)
+    sent_by_vehicle = 0
+    for source, payload, stream in steps:
+        mav = real if source == VEHICLE_ADDR else fake
+        if payload == "position":
+            x = 1.0 if source == VEHICLE_ADDR else 9.0
+            data = frame(mav, local_position(0, x, x))
+            sent_by_vehicle += source == VEHICLE_ADDR
+        elif payload == "heartbeat":
+            data = frame(mav, vehicle_heartbeat(mode=0 if source == VEHICLE_ADDR else 4))
+        elif source == VEHICLE_ADDR:
+            continue  # the vehicle itself sends no garbage in this test
+        else:
+            data = payload
+        link.received(source, data, datagram=not stream or source == VEHICLE_ADDR)
+    positions = [m for m in got if m.get_type() == "LOCAL_POSITION_NED"]
+    assert len(positions) == sent_by_vehicle and all(m.x == 1.0 for m in positions)
+    assert all(m.custom_mode == 0 for m in got if m.get_type() == "HEARTBEAT")
+    assert link.pinned == VEHICLE_ADDR and link.stats.source_changes == 0
