@@ -22,16 +22,9 @@ from koopguide.mavlink import rover
 from koopguide.mavlink.signing import SigningKey
 from tests.guidance.scripted_vehicle import ScriptedVehicle
 
-from .frames import encoder, frame, local_position, vehicle_heartbeat
+from .support import encoder, frame, local_position, until, vehicle_heartbeat
 
 HEADER_FLOOD = bytes([0xFD, 255, 0, 0, 0, 1, 1, 32, 0, 0])  # a MAVLink 2 header claiming a 255-byte payload
-
-
-async def until(predicate, within_s: float = 10.0) -> None:
-    deadline = time.monotonic() + within_s
-    while not predicate():
-        assert time.monotonic() < deadline, "condition not reached in time"
-        await asyncio.sleep(0.02)
 
 
 @contextlib.asynccontextmanager

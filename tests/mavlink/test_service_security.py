@@ -24,7 +24,7 @@ from sitl import config as sitl_config
 from sitl.runner import SimulationThread
 from tests.guidance.scripted_vehicle import ScriptedVehicle
 
-from .frames import encoder, frame, local_position, vehicle_heartbeat
+from .support import encoder, frame, local_position, until, vehicle_heartbeat
 
 FAKE_NED = (9.0, 9.0)  # where the spoofer claims the boat is [m]
 FAKE_TARGET = (7.77, -7.77)  # the position target the spoofer asks the vehicle for [m]
@@ -46,13 +46,6 @@ def service_config(port: int, key: Path | None):
             "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0},
         }
     )  # fmt: skip
-
-
-async def until(predicate, within_s: float = 15.0) -> None:
-    deadline = time.monotonic() + within_s
-    while not predicate():
-        assert time.monotonic() < deadline, "condition not reached in time"
-        await asyncio.sleep(0.02)
 
 
 @pytest.mark.timeout(120)

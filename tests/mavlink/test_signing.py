@@ -17,7 +17,7 @@ from koopguide.mavlink.signing import (
 )
 from koopguide.mavlink.wire import mavlink, new_decoder
 
-from .frames import encoder, frame, local_position, vehicle_heartbeat
+from .support import encoder, frame, local_position, vehicle_heartbeat
 
 KEY = SigningKey(bytes(range(32)), "test")
 

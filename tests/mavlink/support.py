@@ -1,7 +1,10 @@
-"""Frames for the MAVLink tests, built with pymavlink's own encoder (signed or not)."""
+"""Support for the MAVLink tests: frames built with pymavlink's own encoder (signed or not), bounded waits."""
 
 from __future__ import annotations
 
+import asyncio
+import time
+from collections.abc import Callable
 from typing import Any
 
 from koopguide.mavlink.signing import SigningKey, configure_encoder
@@ -40,3 +43,11 @@ def vehicle_heartbeat(mode: int = 0, armed: bool = False) -> Any:
 
 def local_position(t_ms: int, n: float, e: float) -> Any:
     return mavlink.MAVLink_local_position_ned_message(t_ms, n, e, 0.0, 0.0, 0.0, 0.0)
+
+
+async def until(predicate: Callable[[], Any], within_s: float = 10.0) -> None:
+    """Wait (on the running loop) until ``predicate()`` holds; fail after ``within_s`` wall seconds."""
+    deadline = time.monotonic() + within_s
+    while not predicate():
+        assert time.monotonic() < deadline, "condition not reached in time"
+        await asyncio.sleep(0.01)
