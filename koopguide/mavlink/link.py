@@ -106,7 +106,10 @@ class Link:
         with ``retry_first_open`` keeps trying in the background instead."""
         link = cls(settings, on_message)
         global _warned_unsigned
-        if settings.signing_key is None and not _warned_unsigned:
+        key = settings.signing_key
+        if key is not None:
+            log.info("MAVLink %s: signing on (key %s from %s)", link.endpoint, key.fingerprint, key.source)
+        elif not _warned_unsigned:
             _warned_unsigned = True
             log.warning("MAVLink signing is off: anyone who can reach %s is trusted (docs/mavlink.md)", link.endpoint)
         try:
