@@ -18,25 +18,18 @@ import math
 import struct
 from dataclasses import dataclass
 
+from koopguide.mavlink.rover import (  # Rover mode numbers; POSITION_TARGET_TYPEMASK bits (set = ignore)
+    ACC_IGNORE,
+    MODE_NAMES,
+    MODE_NUMBERS,
+    POS_IGNORE,
+    VEL_IGNORE,
+    YAW_IGNORE,
+    YAW_RATE_IGNORE,
+)
 from sitl.config import AutopilotConfig, AutopilotParams, RoverMode
 from sitl.sensors import wrap_pi
 
-# ArduPilot Rover custom_mode numbers (HEARTBEAT.custom_mode, MAV_CMD_DO_SET_MODE param2).
-MODE_NUMBERS = {
-    "MANUAL": 0,
-    "ACRO": 1,
-    "STEERING": 3,
-    "HOLD": 4,
-    "LOITER": 5,
-    "FOLLOW": 6,
-    "SIMPLE": 7,
-    "AUTO": 10,
-    "RTL": 11,
-    "SMART_RTL": 12,
-    "GUIDED": 15,
-    "INITIALISING": 16,
-}
-MODE_NAMES = {number: name for name, number in MODE_NUMBERS.items()}
 SUPPORTED_MODES = frozenset(MODE_NUMBERS[m.value] for m in RoverMode)
 MODES_NEEDING_POSITION = frozenset(MODE_NUMBERS[m] for m in ("LOITER", "GUIDED", "RTL"))
 AUTOPILOT_MODES = frozenset(MODE_NUMBERS[m] for m in ("AUTO", "GUIDED", "LOITER", "RTL", "SMART_RTL"))
@@ -100,12 +93,6 @@ class Frame(enum.IntEnum):
 PIVOT_ANGLE_RAD = math.radians(60.0)  # WP_PIVOT_ANGLE: turn in place beyond this heading error
 REVERSE_HYSTERESIS_RAD = math.radians(30.0)  # loiter flips forward/reverse only past 90 deg + this
 
-# POSITION_TARGET_TYPEMASK bits: a set bit means "ignore this field".
-POS_IGNORE = 0x7  # X, Y, Z
-VEL_IGNORE = 0x38  # VX, VY, VZ
-ACC_IGNORE = 0x1C0  # AX, AY, AZ
-YAW_IGNORE = 0x400
-YAW_RATE_IGNORE = 0x800
 LOCAL_FRAMES = frozenset({Frame.LOCAL_NED, Frame.LOCAL_OFFSET_NED, Frame.BODY_NED, Frame.BODY_OFFSET_NED})
 BODY_FRAMES = frozenset({Frame.BODY_NED, Frame.BODY_OFFSET_NED})
 

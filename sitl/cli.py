@@ -39,6 +39,8 @@ def speedup_value(text: str) -> float:
 SITL_FLAGS: tuple[Flag, ...] = (
     Flag("--mavlink", "mavlink.endpoints", str, "udpout:HOST:PORT, udpin:HOST:PORT, tcpin:HOST:PORT or "
          "tcp:HOST:PORT; repeatable (default udpout:127.0.0.1:14550)", metavar="ENDPOINT", repeat=True),
+    Flag("--signing-key", "mavlink.signing_key", str, "MAVLink 2 signing key: 32 raw bytes or 64 hex characters "
+         "(docs/mavlink.md)", metavar="FILE"),
     Flag("--speedup", "speedup", speedup_value, "simulated s per wall s, or 'max'", metavar="X"),
     Flag("--flow", "flow.kinds", name_list, "none, uniform, vortex, double_gyre, gusts; comma-separated to sum",
          metavar="KIND"),
@@ -106,8 +108,9 @@ async def serve(cfg: SitlConfig) -> int:
         for link in sim.links:
             s = link.stats
             print(
-                f"sitl: {link.endpoint}: in {s.messages_in} msgs, out {s.messages_out} msgs, "
-                f"garbage {s.garbage_bytes} bytes in {s.bad_messages} runs",
+                f"sitl: {link.endpoint}: in {s.received} msgs, out {s.sent} msgs, "
+                f"garbage {s.garbage_bytes} bytes in {s.corrupt} runs, "
+                f"dropped {s.unsigned} unsigned and {s.bad_signature} badly signed",
                 flush=True,
             )
     return 0

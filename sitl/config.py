@@ -192,6 +192,7 @@ class MavlinkConfig:
     port_stride: int  # boat k (0-based) uses each endpoint's port + k * port_stride; 0 shares [-]
     heartbeat_hz: float  # HEARTBEAT rate [Hz]
     streams: StreamRates
+    signing_key: Path | None  # MAVLink 2 signing key file (docs/mavlink.md); null: unsigned, like a fresh autopilot
 
 
 @dataclass(frozen=True)

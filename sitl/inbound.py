@@ -13,9 +13,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
 from koopguide.base.geodesy import geodetic_to_ned
+from koopguide.mavlink.wire import mavlink
 from sitl.autopilot import (
     MODE_NUMBERS,
     Frame,

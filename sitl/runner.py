@@ -31,11 +31,13 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from koopguide.mavlink.endpoint import Endpoint
+from koopguide.mavlink.signing import SigningKey
 from sitl import inbound
 from sitl.boat import Boat
 from sitl.config import SitlConfig
 from sitl.flow import Flow
-from sitl.mavlink_endpoint import Endpoint, Link
+from sitl.mavlink_endpoint import Link, open_link
 from sitl.recorder import Recorder
 from sitl.telemetry import StreamSchedule, TelemetryWriter, default_intervals
 from sitl.vessel import VesselParams
@@ -78,6 +80,7 @@ class Simulation:
         ]
         self.recorder = recorder
         self.links: list[Link] = []
+        self.signing_key: SigningKey | None = None
         self.channels: dict[tuple[int, int], inbound.Channel] = {}  # (id(link), sysid) -> channel
         self.unix_time_at_boot_s = (
             cfg.unix_time_at_boot_s if cfg.unix_time_at_boot_s is not None else time.time()
@@ -94,6 +97,8 @@ class Simulation:
         sim = cls(cfg, recorder)
         try:
             endpoints = [Endpoint.parse(text) for text in cfg.mavlink.endpoints]
+            if cfg.mavlink.signing_key is not None:
+                sim.signing_key = SigningKey.load(cfg.mavlink.signing_key)
             stride = cfg.mavlink.port_stride
             if stride == 0:
                 for endpoint in endpoints:
@@ -108,7 +113,8 @@ class Simulation:
         return sim
 
     async def _open(self, endpoint: Endpoint, boats: list[Boat]) -> None:
-        link = await Link.create(endpoint, tuple(b.sysid for b in boats), self._on_message)
+        systems = tuple(b.sysid for b in boats)
+        link = await open_link(endpoint, systems, self.signing_key, len(self.links), self._on_message)
         self.links.append(link)
         intervals = default_intervals(self.cfg.mavlink.streams)
         for boat in boats:
@@ -130,11 +136,10 @@ class Simulation:
         """System id -> the endpoints that reach it, with the ports actually bound (port 0 resolved)."""
         out: dict[int, list[str]] = {b.sysid: [] for b in self.boats}
         for link in self.links:
-            host, port = (link.endpoint.host, link.endpoint.port)
-            if link.endpoint.kind in ("udpin", "tcpin"):
-                host, port = link.local_address
-            for sysid in link.systems:
-                out[sysid].append(f"{link.endpoint.kind}:{host}:{port}")
+            ep = link.endpoint
+            address = str(ep.with_port(link.local_address[1]) if ep.listens else ep)
+            for sysid in link.encoders:
+                out[sysid].append(address)
         return out
 
     def boat(self, sysid: int) -> Boat:
@@ -187,8 +192,8 @@ class Simulation:
                     channel.writer.home_position()
                 ap.home_changed = False
 
-    def _on_message(self, link: Link, msg: Any) -> None:
-        for sysid in link.systems:
+    def _on_message(self, link: Link, msg: Any, arrived: float) -> None:
+        for sysid in link.encoders:
             inbound.handle(self.channels[(id(link), sysid)], msg)
         # replies and STATUSTEXTs caused by the message leave now, not at the next step
         self._publish()

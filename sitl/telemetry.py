@@ -12,9 +12,8 @@ import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
 from koopguide.base.geodesy import ned_to_geodetic
+from koopguide.mavlink.wire import mavlink
 from sitl.autopilot import AUTOPILOT_MODES, MANUAL_INPUT_MODES
 from sitl.config import OriginConfig, StreamRates
 

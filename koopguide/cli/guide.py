@@ -20,6 +20,8 @@ from koopguide.base.flags import Flag, add_flags, number_pair, overrides_from
 GUIDANCE_FLAGS: tuple[Flag, ...] = (
     Flag("--mavlink", "mavlink.endpoint", str, "udp:HOST:PORT (listen), udpout:, tcp:, tcpin: or DEVICE,BAUD",
          metavar="ENDPOINT"),
+    Flag("--signing-key", "mavlink.signing_key", str, "MAVLink 2 signing key: 32 raw bytes or 64 hex characters "
+         "(docs/mavlink.md)", metavar="FILE"),
     Flag("--vehicle-id", "vehicle_id", str, "name on zenoh: koopguide/<id>/status"),
     Flag("--goal-ned", "frame.goal_ned", number_pair, "where the model's goal lands in local NED [m]", metavar="N,E"),
     Flag("--goal-latlon", "frame.goal_latlon", number_pair, "a geodetic goal instead [deg]", metavar="LAT,LON"),
@@ -58,10 +60,10 @@ def setup_logging(verbose: bool) -> None:
 def cmd_run(args: argparse.Namespace) -> int:
     from koopguide.bus.zenoh_config import load_zenoh_config
     from koopguide.guidance import settings
-    from koopguide.guidance.link import Endpoint
+    from koopguide.guidance.link import link_settings
 
     cfg = settings.load(args.config, overrides_from(args, GUIDANCE_FLAGS))
-    Endpoint.parse(cfg.mavlink.endpoint)  # a bad endpoint is refused with the config's other errors
+    link_settings(cfg.mavlink)  # a bad endpoint or signing key is refused with the config's other errors
     if not args.model.is_file():
         raise ConfigError(f"model file {args.model} not found")
     zenoh_config = load_zenoh_config(args.zenoh_config)

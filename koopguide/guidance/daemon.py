@@ -3,7 +3,7 @@
     MAVLink in -> VehicleClock + KalmanTracker -> GuidanceLaw (frame, field, speed scaling, safety)
     -> SET_POSITION_TARGET_LOCAL_NED out;  status -> zenoh (StatusBus)
 
-One event loop owns everything: the MAVLink connection (MavlinkLink), the estimator and the state
+One event loop owns everything: the MAVLink connection (koopguide.mavlink Link), the estimator and the state
 machine. A fresh position fix triggers a command at once when one is due (so latency is the time to
 compute, not the time to the next tick); a timer in vehicle time covers late or missing fixes, so a
 stale position turns into a zero-velocity command within one cycle. States (DESIGN.md): waiting ->
@@ -32,8 +32,9 @@ from koopguide.guidance.estimation.clock import VehicleClock
 from koopguide.guidance.estimation.current import CurrentEstimator
 from koopguide.guidance.estimation.tracker import KalmanTracker
 from koopguide.guidance.law.command import ZERO, GuidanceLaw, GuidanceState, Setpoint, along_current, hold
-from koopguide.guidance.link import MavlinkLink
+from koopguide.guidance.link import open_link
 from koopguide.guidance.settings import ArrivalAction, ExitMode, GuidanceConfig
+from koopguide.mavlink.link import Link
 from koopguide.model.field import load_field
 
 log = logging.getLogger(__name__)
@@ -76,7 +77,7 @@ class GuidanceDaemon:
         self.current = CurrentEstimator(cfg.estimator)
         self.view = vehicle.VehicleView()
         self.latency = LatencyWindow()
-        self.link: MavlinkLink | None = None
+        self.link: Link | None = None
         self.bus: Any = None
         self.state = GuidanceState.IDLE
         self.reason: str | None = None
@@ -107,7 +108,7 @@ class GuidanceDaemon:
         daemon = cls(cfg, Path(model_path), law)
         log.info("model %s: domain max field speed %.4g units/step -> %.3f m/s (gain %.4g)", model_path,
                  law.v_max, cfg.command.max_speed_mps, law.gain)
-        daemon.link = await MavlinkLink.create(cfg.mavlink, daemon._on_message)
+        daemon.link = await open_link(cfg.mavlink, daemon._on_message)
         if zenoh_config is not None:
             from koopguide.bus.status_bus import StatusBus
 
@@ -412,7 +413,9 @@ class GuidanceDaemon:
             "vehicle_time_s": round(now, 3),
             "current_ned": _rounded(self.current.current_ned) if self.current.updates else None,
             "link": {"up": self._link_up(), "received": link.received, "foreign": link.foreign,
-                     "corrupt": link.corrupt, "sent": link.sent, "reconnects": link.reconnects} if link else None,
+                     "corrupt": link.corrupt, "sent": link.sent, "reconnects": link.reconnects,
+                     "unsigned": link.unsigned, "bad_signature": link.bad_signature,
+                     "wrong_source": link.wrong_source, "source_changes": link.source_changes} if link else None,
         }
 
     def sample_field(self, params: dict[str, str]) -> dict[str, Any]:

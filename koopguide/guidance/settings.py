@@ -58,6 +58,7 @@ class MavlinkSettings:
     reconnect_min_s: Seconds
     reconnect_max_s: Seconds
     command_retry_s: Seconds
+    signing_key: Path | None  # MAVLink 2 signing key file (docs/mavlink.md); null: unsigned, trust the link
 
     def __post_init__(self) -> None:
         check(self.reconnect_max_s >= self.reconnect_min_s, "mavlink.reconnect_max_s", self.reconnect_max_s,

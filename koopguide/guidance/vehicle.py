@@ -1,10 +1,6 @@
-"""What the service knows of the vehicle, and the MAVLink messages it sends to it (ArduPilot Rover).
+"""What the service knows of the vehicle (ArduPilot Rover); the Rover vocabulary is koopguide.mavlink.rover.
 
-Facts (FACTS.md "ArduPilot Rover"): modes by number (GUIDED 15, LOITER 5, HOLD 4...); a mode change is
-COMMAND_LONG MAV_CMD_DO_SET_MODE (176) with param1 = 1 (custom mode enabled), param2 = the mode; arming
-is MAV_CMD_COMPONENT_ARM_DISARM (400); telemetry rates are set with MAV_CMD_SET_MESSAGE_INTERVAL (511).
-Velocity setpoints are SET_POSITION_TARGET_LOCAL_NED in MAV_FRAME_LOCAL_NED with type mask 3559
-(velocity only) or 2535 (velocity + yaw). Conventions: NED metres and m/s; yaw in radians from north.
+Conventions: NED metres and m/s; yaw in radians from north.
 """
 
 from __future__ import annotations
@@ -13,26 +9,40 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from koopguide.guidance.link import mavlink
+from koopguide.mavlink.rover import (
+    GUIDED,
+    HOLD,
+    LOITER,
+    MODE_NAMES,
+    MSG_ATTITUDE,
+    MSG_GLOBAL_POSITION_INT,
+    MSG_LOCAL_POSITION_NED,
+    arm,
+    heartbeat,
+    message_interval,
+    mode_name,
+    set_mode,
+    velocity_setpoint,
+)
+from koopguide.mavlink.wire import mavlink
 
-ROVER_MODES = {
-    "MANUAL": 0, "ACRO": 1, "STEERING": 3, "HOLD": 4, "LOITER": 5, "FOLLOW": 6, "SIMPLE": 7, "AUTO": 10,
-    "RTL": 11, "SMART_RTL": 12, "GUIDED": 15, "INITIALISING": 16,
-}
-MODE_NAMES = {number: name for name, number in ROVER_MODES.items()}
-GUIDED, LOITER, HOLD = ROVER_MODES["GUIDED"], ROVER_MODES["LOITER"], ROVER_MODES["HOLD"]
-
-MASK_VELOCITY = 3559  # 0x0DE7: vx, vy used; position, vz, acceleration, yaw and yaw rate ignored
-MASK_VELOCITY_YAW = 2535  # 0x09E7: velocity and yaw
-MSG_LOCAL_POSITION_NED = 32
-MSG_GLOBAL_POSITION_INT = 33
-MSG_ATTITUDE = 30
-
-
-def mode_name(number: int | None) -> str | None:
-    if number is None:
-        return None
-    return MODE_NAMES.get(number, f"MODE_{number}")
+__all__ = [
+    "GUIDED",
+    "HOLD",
+    "LOITER",
+    "MODE_NAMES",
+    "MSG_ATTITUDE",
+    "MSG_GLOBAL_POSITION_INT",
+    "MSG_LOCAL_POSITION_NED",
+    "VehicleView",
+    "arm",
+    "heartbeat",
+    "mavlink",
+    "message_interval",
+    "mode_name",
+    "set_mode",
+    "velocity_setpoint",
+]
 
 
 @dataclass
@@ -49,38 +59,3 @@ class VehicleView:
 
     def link_up(self, now_wall: float, timeout_s: float) -> bool:
         return self.heartbeat_wall is not None and now_wall - self.heartbeat_wall <= timeout_s
-
-
-def heartbeat() -> mavlink.MAVLink_message:
-    """Our own HEARTBEAT: an onboard controller, not an autopilot."""
-    return mavlink.MAVLink_heartbeat_message(
-        mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE, 3
-    )
-
-
-def command_long(target: tuple[int, int], command: int, *params: float) -> mavlink.MAVLink_message:
-    p = [*params, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0][:7]
-    return mavlink.MAVLink_command_long_message(target[0], target[1], command, 0, *p)
-
-
-def set_mode(target: tuple[int, int], mode: int) -> mavlink.MAVLink_message:
-    return command_long(target, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode)
-
-
-def arm(target: tuple[int, int]) -> mavlink.MAVLink_message:
-    return command_long(target, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-
-
-def message_interval(target: tuple[int, int], message_id: int, rate_hz: float) -> mavlink.MAVLink_message:
-    return command_long(target, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, message_id, 1e6 / rate_hz)
-
-
-def velocity_setpoint(target: tuple[int, int], time_boot_ms: int, velocity_ned: np.ndarray,
-                      yaw_rad: float | None) -> mavlink.MAVLink_message:
-    """SET_POSITION_TARGET_LOCAL_NED: velocity only (3559), or velocity + yaw (2535) when ``yaw_rad`` is given."""
-    vn, ve = (float(v) for v in velocity_ned)
-    mask = MASK_VELOCITY if yaw_rad is None else MASK_VELOCITY_YAW
-    return mavlink.MAVLink_set_position_target_local_ned_message(
-        time_boot_ms & 0xFFFFFFFF, target[0], target[1], mavlink.MAV_FRAME_LOCAL_NED, mask,
-        0.0, 0.0, 0.0, vn, ve, 0.0, 0.0, 0.0, 0.0, 0.0 if yaw_rad is None else float(yaw_rad), 0.0,
-    )

@@ -18,9 +18,10 @@ os.environ["MAVLINK20"] = "1"
 
 from pymavlink import mavutil
 
+from koopguide.mavlink.rover import GUIDED, HOLD, LOITER, MANUAL  # noqa: F401 (the tests use them from here)
+
 mavutil.set_dialect("ardupilotmega")
 mavlink = mavutil.mavlink
-GUIDED, LOITER, HOLD, MANUAL = 15, 5, 4, 0
 
 
 @dataclass

@@ -14,7 +14,6 @@ from koopguide.guidance.estimation.clock import VehicleClock
 from koopguide.guidance.estimation.tracker import KalmanTracker
 from koopguide.guidance.law.command import GuidanceLaw, GuidanceState
 from koopguide.guidance.law.frames import ModelFrame
-from koopguide.guidance.link import Endpoint, EndpointError
 from koopguide.model.field import FlowField, load_field
 
 
@@ -131,15 +130,3 @@ def test_vehicle_clock_follows_a_speeded_up_vehicle_and_restarts_on_reboot():
 def test_config_errors_name_the_key(overrides, expected):
     with pytest.raises(ConfigError, match=expected.replace(".", r"\.")):
         settings.load(overrides=overrides)
-
-
-@pytest.mark.parametrize("text", ["udp:127.0.0.1:14550", "udpin:0.0.0.0:0", "udpout:10.0.0.2:14550",
-                                  "tcp:127.0.0.1:5760", "tcpin:127.0.0.1:5760", "/dev/ttyUSB0,57600"])
-def test_endpoints_users_know_are_accepted(text):
-    assert Endpoint.parse(text).text == text
-
-
-@pytest.mark.parametrize("text", ["udp:127.0.0.1", "tcp:host:99999", "serial", "/dev/ttyUSB0,fast", "udpout:h:0"])
-def test_bad_endpoints_are_refused_by_name(text):
-    with pytest.raises(EndpointError, match="MAVLink endpoint"):
-        Endpoint.parse(text)

@@ -17,6 +17,7 @@ from typing import Any
 
 from pymavlink import mavutil
 
+from koopguide.mavlink.rover import MASK_VELOCITY
 from sitl import config as sitl_config
 from sitl.config import SitlConfig
 
@@ -26,7 +27,7 @@ mavlink = mavutil.mavlink
 GCS_SYSTEM = 255
 GCS_COMPONENT = 190
 WALL_GUARD_S = 60.0  # no single wait in these tests may take longer on the wall clock
-VELOCITY_MASK = 3559  # velocity only (FACTS: 0x0DE7)
+VELOCITY_MASK = MASK_VELOCITY  # velocity only (3559 = 0x0DE7)
 
 
 def sim_config(overrides: dict[str, Any] | None = None) -> SitlConfig:
