@@ -19,11 +19,11 @@ Registrar = Callable[[argparse._SubParsersAction], None]
 
 def _registrars() -> list[Registrar]:
     # Imported lazily so `koopguide eval` never pays for torch, and `koopguide sitl` never for the learner.
-    from koopguide import commands_guide, commands_learn, commands_monitor
+    from koopguide import commands_guide, commands_learn, commands_monitor, replay
     from koopguide.dashboard import command as commands_dashboard
 
     registrars: list[Registrar] = [commands_learn.register, commands_guide.register, commands_monitor.register,
-                                   commands_dashboard.register]
+                                   commands_dashboard.register, replay.register]
     try:
         from sitl import cli as sitl_cli
     except ImportError as exc:  # the simulator package is part of this distribution
