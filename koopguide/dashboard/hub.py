@@ -194,15 +194,15 @@ class FleetHub:
             lines = streamlines(grid)
         except (ValueError, zenoh.ZError) as exc:
             entry.error, entry.failed_at = str(exc), time.monotonic()
+            entry.pending = False
             log.warning("field of %s (%s): %s; retrying in %g s", entry.vehicle_id, entry.model, exc, FIELD_RETRY_S)
             return
-        finally:
-            entry.pending = False
-        entry.lines = [[[round(float(v), 4) for v in p] for p in line] for line in lines]
         entry.corners_ned = grid.corners_ned.round(4).tolist()
         entry.goal_ned = None if grid.goal_ned is None else grid.goal_ned.round(4).tolist()
         entry.arrival_radius_m = self._arrival_radius(entry.vehicle_id)
         entry.error = None
+        entry.lines = [[[round(float(v), 4) for v in p] for p in line] for line in lines]  # last: now it is ready
+        entry.pending = False
 
     def _arrival_radius(self, vehicle_id: str) -> float | None:
         """``arrival.radius_m`` from the vehicle's config queryable [m]; None when it does not say."""

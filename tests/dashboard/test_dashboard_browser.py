@@ -93,6 +93,7 @@ def test_two_guided_boats_move_over_the_streamlines_in_headless_chromium(tmp_pat
                 assert moved >= 0.1, f"{vid} moved only {moved:.3f} m in {t1 - t0:.1f} s"
                 rate = (after[vid]["updates"] - before[vid]["updates"]) / (t1 - t0)
                 assert rate >= 5.0, f"{vid}: {rate:.1f} updates/s in the page (services publish at 10 Hz)"
+                print(f"{vid}: moved {moved:.2f} m and {rate:.1f} updates/s in the page over {t1 - t0:.1f} s")
                 # each boat is drawn near its own goal, 2.5 m from the other's: positions are not mixed up
                 assert math.hypot(after[vid]["n"] - goal[0], after[vid]["e"] - goal[1]) < 2.5
             assert counts["boats"] == 2 and counts["streamlines"] >= 20

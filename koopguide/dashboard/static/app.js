@@ -59,7 +59,8 @@ function update(v, trail) {
       if (entry.trail.length > 600) entry.trail.shift();
     }
     const vel = s.velocity_ned;
-    if (vel && Math.hypot(vel[0], vel[1]) > 0.02) entry.heading = Math.atan2(vel[1], vel[0]);
+    if (typeof s.heading_rad === "number") entry.heading = s.heading_rad;  // when the service sends it
+    else if (vel && Math.hypot(vel[0], vel[1]) > 0.02) entry.heading = Math.atan2(vel[1], vel[0]);
   }
   entry.msg = v;
 }
@@ -171,7 +172,7 @@ function draw() {
       const tip = (vel) => P.xy([p[0] + ARROW_SECONDS * vel[0], p[1] + ARROW_SECONDS * vel[1]]);
       if (s.current_ned) arrow(at, tip(s.current_ned), "#0077b6", 2);
       arrow(at, tip(s.cmd_velocity_ned), "#d62828", 2);
-      const h = v.heading === null ? 0 : v.heading;  // course over ground; north until it moves
+      const h = v.heading === null ? 0 : v.heading;  // heading_rad, else course over ground; north until it moves
       ctx.save(); ctx.translate(at[0], at[1]); ctx.rotate(h);  // canvas angle from up = compass heading
       ctx.fillStyle = c; ctx.strokeStyle = "#222"; ctx.lineWidth = 1;
       ctx.beginPath(); ctx.moveTo(0, -11); ctx.lineTo(6, 8); ctx.lineTo(0, 4); ctx.lineTo(-6, 8); ctx.closePath();
@@ -221,7 +222,11 @@ function table() {
     tr.dataset.seq = s.seq;
     if (s.position_ned) { tr.dataset.n = s.position_ned[0]; tr.dataset.e = s.position_ned[1]; }
     const ack = s.control_ack, want = pending.get(id);
-    const note = want ? (ack && ack.nonce === want.nonce ? ` (${want.action} acknowledged)` : ` (${want.action} sent)`) : "";
+    let note = "";
+    if (want && ack && ack.nonce === want.nonce) {  // the service's answer (docs/dashboard.md, "Control")
+      note = ack.accepted ? ` (${want.action} acknowledged)` : ` (${want.action} refused: ${ack.reason})`;
+    } else if (want) note = ` (${want.action} sent)`;
+    tr.dataset.control = note.trim();
     cell("state").className = `state st-${s.state}`;
     cell("state").textContent = s.state + note;
     if (s.reason) { const r = document.createElement("small"); r.textContent = s.reason; cell("state").append(r); }
