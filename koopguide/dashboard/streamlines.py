@@ -107,6 +107,8 @@ class FieldGrid:
 
 
 def _array(reply: dict[str, Any], key: str, n: int) -> np.ndarray:
+    if key not in reply:
+        raise FieldGridError(f"field reply has no {key!r} (keys: {', '.join(sorted(map(str, reply)))})")
     try:
         values = np.asarray(reply.get(key), dtype=float)
     except (TypeError, ValueError):

@@ -56,6 +56,7 @@ async def _serve_and_ask(port: int, token: str | None) -> dict:
                 headers={"Origin": "http://elsewhere.example"},
             ) as reply:
                 out["foreign"] = (reply.status, await reply.json())
+        out["fields"] = {key: (e.queries, e.error, e.lines) for key, e in hub.fields.items()}
     finally:
         await dashboard.stop()
         await server.close()
@@ -79,6 +80,10 @@ def test_read_only_dashboard_streams_statuses_and_refuses_control():
     assert out["index"][0] == 200 and "/static/app.js" in out["index"][1]
     assert out["app"][0] == 200 and "http://" not in out["app"][1].replace("location.protocol", "")  # no CDN
     assert out["control"][0] == 403 and "--allow-control" in out["control"][1]["error"]
+    # the test publisher's field queryable answers with no grid: asked once, the fault kept, nothing drawn
+    ((queries, error, lines),) = out["fields"].values()
+    assert list(out["fields"]) == [("boat7", "zshape.pt")]
+    assert queries == 1 and "field reply has no 'position_ned'" in error and lines is None
 
 
 @pytest.mark.timeout(60)
