@@ -1,6 +1,6 @@
 """A whole two-boat rig for the dashboard tests, every part a real process on loopback:
 
-``koopguide sitl --count 2`` (one udpout link per service), two ``koopguide run`` services (system ids
+``koopguide sitl --count 2`` (started by :attr:`Rig.start_simulator`), two ``koopguide run`` services (system ids
 1 and 2, vehicle ids boat1 and boat2, goals 2.5 m apart), and ``koopguide dashboard --listen
 127.0.0.1:0``, all on one zenoh group: the shipped default configuration moved to a free port
 (multicast scouting stays off). Conventions: local NED metres.
@@ -16,7 +16,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -37,7 +37,7 @@ REPO = Path(__file__).resolve().parents[2]
 KOOPGUIDE = [sys.executable, "-m", "koopguide"]
 #: Where each boat's model goal lands [N, E] m, and which Zshape demonstration it starts from.
 BOATS = {"boat1": ((0.0, 0.0), 0), "boat2": ((0.0, 2.5), 3)}
-SPEEDUP = 4.0
+SPEEDUP = 3.0
 STATUS_HZ = 10.0
 
 
@@ -115,6 +115,7 @@ class Rig:
     zenoh_config: Path
     processes: list[Process]
     goals: dict[str, tuple[float, float]]
+    start_simulator: Callable[[], None]  # the boats start once the page is watching
 
 
 def boat_setup(model: Path, folder: Path) -> tuple[dict, dict[str, int]]:
@@ -195,19 +196,22 @@ def running_rig(model: Path, folder: Path, dashboard_args: tuple[str, ...] = ())
                     ],
                 )
             )
-        for proc in processes:  # the boats drift in the current until their service steers
-            proc.wait_for("state waiting", timeout=40)
-        links = [f"--mavlink=udpout:127.0.0.1:{ports['boat1']}"]  # boat 2 on that port + 10
-        processes.append(
-            Process.start("sitl", [*KOOPGUIDE, "sitl", "--config", str(folder / "sitl.yaml"), *links, "--quiet"])
-        )
         dashboard = Process.start(
             "dashboard",
             [*KOOPGUIDE, "dashboard", "--zenoh-config", str(zenoh_config), "--listen", "127.0.0.1:0", *dashboard_args],
         )
         processes.append(dashboard)
         url = dashboard.wait_for(r"(http://127\.0\.0\.1:\d+/)", timeout=30).group(1)
-        yield Rig(url, zenoh_config, processes, {vid: goal for vid, (goal, _) in BOATS.items()})
+        for proc in processes[:-1]:  # the boats would drift in the current until their service steers
+            proc.wait_for("state waiting", timeout=40)
+
+        def start_simulator() -> None:
+            links = [f"--mavlink=udpout:127.0.0.1:{ports['boat1']}"]  # boat 2 on that port + 10
+            processes.append(
+                Process.start("sitl", [*KOOPGUIDE, "sitl", "--config", str(folder / "sitl.yaml"), *links, "--quiet"])
+            )
+
+        yield Rig(url, zenoh_config, processes, {vid: goal for vid, (goal, _) in BOATS.items()}, start_simulator)
     finally:
         for proc in reversed(processes):
             proc.stop()
