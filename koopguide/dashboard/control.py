@@ -2,8 +2,9 @@
 
 The dashboard (``koopguide dashboard --allow-control --control-token-file FILE``) publishes one request
 per vehicle when an operator who knows the token asks for it. The guidance service that shares the
-token verifies it with :func:`decode_control` and a :class:`ReplayGuard`, acts on it, and
-acknowledges it in its status (see docs/dashboard.md, "Control").
+token passes each payload to a :class:`ControlInbox` (which verifies it with :func:`decode_control`
+and a :class:`ReplayGuard`), acts on what it accepts, and publishes ``ControlInbox.ack`` in its status
+as ``control_ack`` (see docs/dashboard.md, "Control").
 
 One request is one compact UTF-8 JSON object:
 
@@ -131,6 +132,47 @@ class ReplayGuard:
             raise ControlError(f"control request {request.nonce} was already received (replay)")
         self._seen[request.nonce] = request.t
         return request
+
+
+class ControlInbox:
+    """The service's side, pure: feed it each payload received on :func:`control_key` and publish
+    :attr:`ack` in the status as ``control_ack``; act on the requests :meth:`receive` returns.
+
+    ``ack`` is ``{"nonce", "action", "accepted", "reason"}`` for the latest payload (``nonce`` and
+    ``action`` null when the payload did not carry them), or None before any.
+    """
+
+    def __init__(self, vehicle_id: str, token: str, max_age_s: float = MAX_AGE_S) -> None:
+        self.vehicle_id = validate_vehicle_id(vehicle_id)
+        self.token = check_token(token)
+        self.max_age_s = max_age_s
+        self.guard = ReplayGuard(max_age_s)
+        self.ack: dict[str, Any] | None = None
+        self.refused = 0
+
+    def receive(self, payload: bytes, now: float) -> ControlRequest | None:
+        """The verified request, or None (refused: counted, and the reason put in :attr:`ack`)."""
+        try:
+            request = self.guard.admit(decode_control(payload, self.token, self.vehicle_id, now, self.max_age_s), now)
+        except ControlError as exc:
+            self.refused += 1
+            nonce, action = _peek(payload)
+            self.ack = {"nonce": nonce, "action": action, "accepted": False, "reason": str(exc)}
+            return None
+        self.ack = {"nonce": request.nonce, "action": request.action, "accepted": True, "reason": None}
+        return request
+
+
+def _peek(payload: bytes) -> tuple[str | None, str | None]:
+    """``nonce`` and ``action`` of an unverified payload, if it has them as short strings."""
+    try:
+        body = json.loads(bytes(payload).decode("utf-8"), parse_constant=_refuse_constant)
+    except (UnicodeDecodeError, ValueError):
+        return None, None
+    if not isinstance(body, dict):
+        return None, None
+    nonce, action = body.get("nonce"), body.get("action")
+    return (nonce if isinstance(nonce, str) and len(nonce) <= 64 else None, action if action in ACTIONS else None)
 
 
 def _refuse_constant(name: str) -> None:

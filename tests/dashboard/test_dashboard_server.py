@@ -5,19 +5,23 @@ from __future__ import annotations
 
 import asyncio
 import json
+import threading
 import time
 from pathlib import Path
 
 import pytest
+import zenoh
 from aiohttp import ClientSession
 from aiohttp.test_utils import TestServer
 
 from koopguide import cli
+from koopguide.dashboard.control import ControlInbox, control_key
 from koopguide.dashboard.hub import FleetHub
 from koopguide.dashboard.server import Dashboard, Listen
+from koopguide.guidance.status_bus import StatusBus
 from koopguide.guidance.zenoh_config import default_zenoh_config
 from tests.guidance.test_monitor import publishing
-from tests.guidance.test_status_bus import free_port
+from tests.guidance.test_status_bus import config_snapshot, field_sampler, free_port, sample_status
 
 TOKEN = "server-test-token-0123456789"
 
@@ -125,3 +129,85 @@ def test_listen_parses_ipv4_and_ipv6():
     assert Listen.parse("127.0.0.1:0") == Listen("127.0.0.1", 0) and Listen.parse("127.0.0.1:0").loopback
     assert Listen.parse("[::1]:8080") == Listen("::1", 8080)
     assert not Listen.parse("0.0.0.0:8080").loopback
+
+
+def obeying_service(vehicle_id: str, port: int, token: str, stop: threading.Event) -> None:
+    """What the integrator wires into the service: control requests through a ControlInbox, the state
+    ``hold`` while held, and ``control_ack`` in every status (docs/dashboard.md, "Control")."""
+
+    async def run() -> None:
+        bus = await StatusBus.create(vehicle_id, default_zenoh_config(port), field_sampler, config_snapshot)
+        session = zenoh.open(default_zenoh_config(port))
+        inbox = ControlInbox(vehicle_id, token)
+        requests = session.declare_subscriber(control_key(vehicle_id), zenoh.handlers.RingChannel(16))
+        state, seq = "guiding", 0
+        try:
+            while not stop.is_set():
+                while (sample := requests.try_recv()) is not None:
+                    request = inbox.receive(sample.payload.to_bytes(), time.time())
+                    if request is not None:
+                        state = "hold" if request.action == "hold" else "guiding"
+                seq += 1
+                bus.publish(
+                    sample_status(
+                        vehicle_id,
+                        seq=seq,
+                        state=state,
+                        control_ack=inbox.ack,
+                        reason="operator hold (dashboard)" if state == "hold" else None,
+                    )
+                )
+                await asyncio.sleep(0.05)
+        finally:
+            requests.undeclare()
+            session.close()
+            await bus.close()
+
+    asyncio.run(run())
+
+
+async def _hold_and_watch(port: int) -> tuple[dict, list[dict]]:
+    hub = await asyncio.to_thread(FleetHub.open, default_zenoh_config(port))
+    dashboard = Dashboard(hub, TOKEN)
+    server = TestServer(dashboard.app, host="127.0.0.1", port=0)
+    await server.start_server()
+    await dashboard.start()
+    seen: list[dict] = []
+    try:
+        async with ClientSession() as http, http.ws_connect(f"http://127.0.0.1:{server.port}/ws") as ws:
+            while not seen:  # until the service's first status: then it is connected to the dashboard
+                msg = json.loads((await ws.receive(timeout=5)).data)
+                seen += [v["status"] for v in msg.get("vehicles", []) if v["status"]]
+            body = {"action": "hold", "vehicle_id": "*", "token": TOKEN}
+            async with http.post(f"http://127.0.0.1:{server.port}/api/control", json=body) as reply:
+                sent = await reply.json()
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline:
+                msg = json.loads((await ws.receive(timeout=5)).data)
+                seen += [v["status"] for v in msg.get("vehicles", []) if v["status"]]
+                if seen and (seen[-1].get("control_ack") or {}).get("nonce") == sent["sent"]["boat3"]:
+                    break
+    finally:
+        await dashboard.stop()
+        await server.close()
+        await asyncio.to_thread(hub.close)
+    return sent, seen
+
+
+@pytest.mark.timeout(60)
+def test_a_hold_goes_to_the_service_and_its_acknowledgement_comes_back_to_the_page():
+    port = free_port()
+    stop = threading.Event()
+    service = threading.Thread(target=obeying_service, args=("boat3", port, TOKEN, stop))
+    service.start()
+    try:
+        sent, seen = asyncio.run(_hold_and_watch(port))
+    finally:
+        stop.set()
+        service.join(10)
+    nonce = sent["sent"]["boat3"]
+    assert sent["action"] == "hold" and list(sent["sent"]) == ["boat3"]
+    last = seen[-1]
+    assert last["control_ack"] == {"nonce": nonce, "action": "hold", "accepted": True, "reason": None}
+    assert last["state"] == "hold" and last["reason"] == "operator hold (dashboard)"
+    assert seen[0]["state"] == "guiding"  # it was guiding before the operator's hold

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from koopguide.dashboard.control import (
     ControlError,
+    ControlInbox,
     ReplayGuard,
     check_token,
     control_key,
@@ -162,3 +163,22 @@ def test_wrong_token_wrong_vehicle_stale_replayed_and_garbage_requests_are_refus
         encode_control("reboot", "boat1", TOKEN, 1000.0)
     with pytest.raises(ValueError, match="at least 16 characters, got 5"):
         check_token(" short \n")
+
+
+def test_the_service_inbox_accepts_once_and_acknowledges_every_payload():
+    inbox = ControlInbox("boat1", TOKEN)
+    assert inbox.ack is None
+    payload = encode_control("hold", "boat1", TOKEN, 1000.0)
+    nonce = json.loads(payload)["nonce"]
+    request = inbox.receive(payload, 1000.5)
+    assert request is not None and request.action == "hold"
+    assert inbox.ack == {"nonce": nonce, "action": "hold", "accepted": True, "reason": None}
+    assert inbox.receive(payload, 1001.0) is None  # the same request again: a replay
+    assert inbox.ack["nonce"] == nonce and inbox.ack["accepted"] is False and "replay" in inbox.ack["reason"]
+    forged = encode_control("resume", "boat1", "not-the-token-0123456789", 1002.0)
+    assert inbox.receive(forged, 1002.0) is None
+    assert inbox.ack["action"] == "resume" and "wrong MAC" in inbox.ack["reason"]
+    assert inbox.receive(b"\x00garbage", 1003.0) is None
+    assert inbox.ack == {"nonce": None, "action": None, "accepted": False, "reason": inbox.ack["reason"]}
+    assert inbox.refused == 3
+    json.dumps(inbox.ack, allow_nan=False)  # fit for the status as it is
