@@ -29,7 +29,7 @@ from koopguide.config import ConfigError
 from koopguide.dashboard import control
 from koopguide.dashboard.streamlines import FieldGrid, streamlines
 from koopguide.guidance.zenoh_config import zenoh_error_text
-from koopguide.monitor import ALIVE_KEYS, CHANNEL_CAPACITY, STATUS_KEYS, MonitorState, VehicleView
+from koopguide.monitor import ALIVE_KEYS, CHANNEL_CAPACITY, STATUS_KEYS, MonitorState, VehicleView, vehicle_id_of
 
 log = logging.getLogger(__name__)
 
@@ -118,14 +118,14 @@ class FleetHub:
         while (sample := self.liveliness.try_recv()) is not None:
             key = str(sample.key_expr)
             self.state.on_liveliness(key, sample.kind == zenoh.SampleKind.PUT)
-            changed.append(key.split("/")[1] if key.count("/") >= 2 else key)
+            changed.append(vehicle_id_of(key))
         while (sample := self.statuses.try_recv()) is not None:
             if sample.kind != zenoh.SampleKind.PUT:
                 continue
             key = str(sample.key_expr)
             before = self.state.malformed
             self.state.on_status(key, sample.payload.to_bytes(), now)
-            view = self.state.vehicles.get(key.split("/")[1] if key.count("/") >= 2 else key)
+            view = self.state.vehicles.get(vehicle_id_of(key))
             if view is None or self.state.malformed != before:
                 continue
             position = view.status["position_ned"] if view.status else None

@@ -6,11 +6,11 @@ Routes (aiohttp):
 ``GET /static/...``   ``app.js``, ``style.css``
 ``GET /ws``           WebSocket, server to browser only, JSON text messages:
                       ``{"type": "hello", "control": bool, "vehicles": [...], "fields": [...]}`` once, then
-                      ``{"type": "status", "t": unix s, "vehicles": [...]}`` as statuses arrive (each
+                      ``{"type": "status", "t": unix s, "malformed": n, "vehicles": [...]}`` as statuses arrive (each
                       vehicle: ``vehicle_id, alive, status, received_at, statuses, malformed, last_error``;
                       ``trail`` [[N, E], ...] m in ``hello`` only) and
                       ``{"type": "field", "vehicle_id", "model", "streamlines": [[[N, E], ...], ...],
-                      "corners_ned", "goal_ned"}`` (NED metres) when a vehicle's field is known
+                      "corners_ned", "goal_ned", "arrival_radius_m"}`` (NED metres) when a vehicle's field is known
 ``GET /api/state``    the same as ``hello``, as plain JSON
 ``POST /api/control`` only with ``--allow-control``: ``{"action": "hold"|"resume", "vehicle_id": ID|"*",
                       "token": TOKEN}``; a wrong token is 403. See ``control.py`` for the zenoh message.
@@ -171,6 +171,7 @@ class Dashboard:
                 message = {
                     "type": "status",
                     "t": time.time(),
+                    "malformed": self.hub.state.malformed,
                     "vehicles": [self.hub.vehicle_message(vid) for vid in changed],
                 }
                 await self.broadcast(message)

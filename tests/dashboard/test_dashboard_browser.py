@@ -114,7 +114,12 @@ def test_two_guided_boats_move_over_the_streamlines_in_headless_chromium(tmp_pat
             token_box.send_keys(TOKEN)
             driver.find_element(By.CSS_SELECTOR, 'tr[data-vehicle="boat1"] button.hold').click()
             wait.until(lambda _: result.get_attribute("data-result") == "sent")
-            sample = requests.recv()
+            sample = None
+            deadline = time.monotonic() + 10
+            while sample is None and time.monotonic() < deadline:
+                sample = requests.try_recv()
+                time.sleep(0.05)
+            assert sample is not None, "no control request on zenoh within 10 s"
             assert str(sample.key_expr) == "koopguide/boat1/control"
             request = decode_control(sample.payload.to_bytes(), TOKEN, "boat1", time.time())
             assert request.action == "hold" and request.source.startswith("dashboard@")

@@ -10,6 +10,7 @@ const vehicles = new Map();        // id -> {msg, trail: [[N, E]], arrivedAt: ms
 const fields = new Map();          // id -> field message
 const pending = new Map();         // id -> {action, nonce}
 let controlAllowed = false;
+let malformed = 0;                 // statuses the server refused (decode_status)
 let frames = 0;
 
 const canvas = document.getElementById("map");
@@ -29,6 +30,7 @@ function connect() {
 }
 
 function receive(msg) {
+  if (typeof msg.malformed === "number") malformed = msg.malformed;
   if (msg.type === "hello") {
     vehicles.clear();
     fields.clear();
@@ -244,7 +246,8 @@ function table() {
     }
   }
   const alive = [...vehicles.values()].filter((v) => v.msg.alive !== false).length;
-  document.getElementById("summary").textContent = `${vehicles.size} vehicle(s), ${alive} alive`;
+  document.getElementById("summary").textContent = `${vehicles.size} vehicle(s), ${alive} alive` +
+    (malformed ? `, ${malformed} malformed status(es) ignored` : "");
 }
 
 // ----------------------------------------------------------------------------- control
