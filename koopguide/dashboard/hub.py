@@ -81,6 +81,9 @@ class FleetHub:
     liveliness: Any
     state: MonitorState = field(default_factory=MonitorState)
     trails: dict[str, collections.deque] = field(default_factory=dict)
+    #: Statuses whose ``seq`` did not grow, per vehicle: the service restarted, or another peer publishes
+    #: on its key (zenoh does not authenticate publishers; see issue 11 on access control).
+    seq_regressions: dict[str, int] = field(default_factory=dict)
     fields: collections.OrderedDict[tuple[str, str], FieldEntry] = field(default_factory=collections.OrderedDict)
 
     @classmethod
@@ -124,10 +127,14 @@ class FleetHub:
                 continue
             key = str(sample.key_expr)
             before = self.state.malformed
+            previous = self.state.vehicles.get(vehicle_id_of(key))
+            last_seq = previous.status["seq"] if previous is not None and previous.status else None
             self.state.on_status(key, sample.payload.to_bytes(), now)
             view = self.state.vehicles.get(vehicle_id_of(key))
             if view is None or self.state.malformed != before:
                 continue
+            if last_seq is not None and view.status["seq"] <= last_seq:  # a restart, or a second publisher
+                self.seq_regressions[view.vehicle_id] = self.seq_regressions.get(view.vehicle_id, 0) + 1
             position = view.status["position_ned"] if view.status else None
             if position is not None:
                 trail = self.trails.setdefault(view.vehicle_id, collections.deque(maxlen=TRAIL_POINTS))
@@ -145,6 +152,7 @@ class FleetHub:
             "statuses": view.statuses,
             "malformed": view.malformed,
             "last_error": view.last_error,
+            "seq_regressions": self.seq_regressions.get(vehicle_id, 0),
         }
         if with_trail:
             out["trail"] = list(self.trails.get(vehicle_id, ()))

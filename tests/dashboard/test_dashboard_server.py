@@ -79,6 +79,7 @@ def test_read_only_dashboard_streams_statuses_and_refuses_control():
     seqs = [v["status"]["seq"] for v in received]
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)  # each status once, in order
     assert received[-1]["status"]["state"] == "guiding" and received[-1]["alive"] is True
+    assert received[-1]["seq_regressions"] == 0  # one publisher counting up
     state = out["state"]["vehicles"][0]
     assert state["vehicle_id"] == "boat7" and len(state["trail"]) >= 5  # the trail comes with the snapshot
     assert out["index"][0] == 200 and "/static/app.js" in out["index"][1]
@@ -211,3 +212,19 @@ def test_a_hold_goes_to_the_service_and_its_acknowledgement_comes_back_to_the_pa
     assert last["control_ack"] == {"nonce": nonce, "action": "hold", "accepted": True, "reason": None}
     assert last["state"] == "hold" and last["reason"] == "operator hold (dashboard)"
     assert seen[0]["state"] == "guiding"  # it was guiding before the operator's hold
+
+
+@pytest.mark.timeout(60)
+def test_a_second_publisher_on_a_vehicles_key_shows_as_seq_regressions():
+    port = free_port()
+    hub = FleetHub.open(default_zenoh_config(port))
+    try:
+        with publishing("boat5", port, period=0.05), publishing("boat5", port, period=0.05):
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline and hub.seq_regressions.get("boat5", 0) < 3:
+                hub.poll()
+                time.sleep(0.05)
+        assert hub.seq_regressions["boat5"] >= 3
+        assert hub.vehicle_message("boat5")["seq_regressions"] == hub.seq_regressions["boat5"]
+    finally:
+        hub.close()

@@ -232,6 +232,12 @@ function table() {
     cell("state").className = `state st-${s.state}`;
     cell("state").textContent = s.state + note;
     if (s.reason) { const r = document.createElement("small"); r.textContent = s.reason; cell("state").append(r); }
+    if (v.msg.seq_regressions) {  // a restart, or someone else publishing on this vehicle's key
+      const w = document.createElement("small");
+      w.className = "warn";
+      w.textContent = `seq went back ${v.msg.seq_regressions}x: restarted, or a second publisher`;
+      cell("state").append(w);
+    }
     cell("mode").textContent = s.mode || "-";
     cell("armed").textContent = s.armed === null ? "-" : s.armed ? "yes" : "no";
     cell("dist").textContent = fmt(s.distance_to_goal_m, 2);
