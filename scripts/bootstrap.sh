@@ -35,5 +35,9 @@ if ! "$PY" -c "import torch" 2>/dev/null; then
 fi
 
 "$PY" -m pip install -q -e ".[dev]"
+# MAVProxy (a real ground station for the simulator tests) without its GUI dependencies: its default
+# install pulls vtk and opencv (~1.2 GB); what it needs without the GUI (pyserial, pynmeagps,
+# defusedxml, pymavlink, numpy) is in the dev extra.
+"$PY" -m pip install -q --no-deps "MAVProxy==1.8.75"
 touch "$STAMP"
 echo "bootstrap: ready ($("$PY" -c 'import torch; print("torch", torch.__version__)'))" >&2

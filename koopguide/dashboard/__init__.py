@@ -1,0 +1,1 @@
+"""The live web dashboard (``koopguide dashboard``): server, zenoh hub, streamlines, control requests."""
