@@ -43,8 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def cmd_dashboard(args: argparse.Namespace) -> int:
     from koopguide.base.config import read_config_text
+    from koopguide.bus import control
     from koopguide.bus.zenoh_config import load_zenoh_config
-    from koopguide.dashboard import control
     from koopguide.dashboard.server import Listen, serve
 
     listen = Listen.parse(args.listen)

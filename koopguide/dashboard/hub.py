@@ -26,10 +26,10 @@ from typing import Any
 import zenoh
 
 from koopguide.base.config import ConfigError
+from koopguide.bus import control
 from koopguide.bus.monitor import ALIVE_KEYS, CHANNEL_CAPACITY, STATUS_KEYS, MonitorState, VehicleView, vehicle_id_of
 from koopguide.bus.streamlines import FieldGrid, streamlines
 from koopguide.bus.zenoh_config import zenoh_error_text
-from koopguide.dashboard import control
 
 log = logging.getLogger(__name__)
 

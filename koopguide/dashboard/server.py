@@ -34,7 +34,7 @@ from typing import Any
 import zenoh
 from aiohttp import WSMsgType, web
 
-from koopguide.dashboard import control
+from koopguide.bus import control
 from koopguide.dashboard.hub import FieldEntry, FleetHub, run_fields
 
 log = logging.getLogger(__name__)

@@ -22,15 +22,15 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from koopguide.commands_learn import save
-from koopguide.guidance.frames import ModelFrame
-from koopguide.guidance.mission import demo_start_pose, free_udp_port
-from koopguide.learn import trainer
 
-from koopguide import data
+from koopguide.base import data
 from koopguide.bus.zenoh_config import DEFAULT_ZENOH_CONFIG_FILE, WELL_KNOWN_PORT
 from koopguide.guidance import settings
+from koopguide.guidance.law.frames import ModelFrame
+from koopguide.harness.mission import demo_start_pose, free_udp_port
 from koopguide.model.field import load_field
+from koopguide.model.learn import trainer
+from koopguide.model.learn.export import save
 from tests.learn.conftest import small_config
 
 REPO = Path(__file__).resolve().parents[2]

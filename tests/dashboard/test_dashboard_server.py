@@ -13,10 +13,10 @@ import pytest
 import zenoh
 from aiohttp import ClientSession
 from aiohttp.test_utils import TestServer
-from koopguide.guidance.status_bus import StatusBus
 
 from koopguide import cli
 from koopguide.bus.control import ControlInbox, control_key
+from koopguide.bus.status_bus import StatusBus
 from koopguide.bus.zenoh_config import default_zenoh_config
 from koopguide.dashboard.hub import FleetHub
 from koopguide.dashboard.server import Dashboard, Listen

@@ -10,14 +10,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from koopguide.guidance.command import GuidanceLaw
 from mcap.reader import make_reader
 from PIL import Image, ImageChops
 
-from koopguide import cli, data
+from koopguide import cli
+from koopguide.base import data
 from koopguide.bus.missionlog import SCHEMAS, MissionLog, MissionLogError, read_mission
 from koopguide.dashboard.replay import frame_times
 from koopguide.guidance import settings
+from koopguide.guidance.law.command import GuidanceLaw
 from koopguide.model.field import load_field
 from tests.guidance.test_status_bus import sample_status
 

@@ -1,5 +1,5 @@
 """Pure parts of the dashboard: the sampled field's interpolation and streamlines, and the signed
-control requests (koopguide/dashboard/streamlines.py, control.py)."""
+control requests (koopguide/bus/streamlines.py, koopguide/bus/control.py)."""
 
 from __future__ import annotations
 
