@@ -47,6 +47,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--flow", metavar="KIND", help="none, uniform, vortex, double_gyre, gusts; comma-separated to sum"
     )
     parser.add_argument("--count", metavar="N", type=int, help="number of boats (system ids 1..N)")
+    parser.add_argument(
+        "--vehicle",
+        metavar="KIND",
+        help="diff_thrust (default), rudder or vectored; comma-separated for one kind per boat",
+    )
     parser.add_argument("--seed", metavar="N", type=int, help="random seed for flow and sensor noise")
     parser.add_argument("--duration", metavar="S", type=float, help="stop after S simulated seconds")
     parser.add_argument("--record", metavar="FILE", help="write ground truth as JSON lines to FILE")
@@ -64,6 +69,12 @@ def overrides(args: argparse.Namespace) -> dict[str, Any]:
         out["flow"] = {"kinds": [k.strip() for k in args.flow.split(",") if k.strip()]}
     if args.count is not None:
         out["count"] = args.count
+    if args.vehicle is not None:
+        kinds = [k.strip() for k in args.vehicle.split(",") if k.strip()]
+        if len(kinds) == 1:
+            out["vehicle"] = kinds[0]
+        else:
+            out["vehicles"] = kinds
     if args.seed is not None:
         out["seed"] = args.seed
     if args.duration is not None:

@@ -17,8 +17,9 @@ Mixers (commands in [-1, 1], steering > 0 turns to starboard):
 - DIFF_THRUST (port, stbd) = (throttle + steering, throttle - steering), scaled back fairly when saturated;
 - RUDDER (throttle, rudder) = (throttle, +-steering), the rudder reversed when going astern (as
   ArduPilot's regular steering does); a rudder turns the boat only with way through the water;
-- VECTORED (port, stbd, bow, stern): the pair as DIFF_THRUST, the tunnel thrusters (lateral +- steering);
-  the lateral channel is used only to hold a point (loiter), so in GUIDED it behaves like the others.
+- VECTORED (port, stbd, bow, stern): the pair drives (throttle, throttle), the tunnel thrusters steer
+  and push sideways (lateral +- steering), so it turns on the spot with a pure couple; the lateral
+  channel is used only to hold a point (loiter), so in GUIDED it behaves like the others.
 
 Conventions: NED positions [m] and velocities [m/s], headings from north clockwise [rad], rates [rad/s].
 """
@@ -203,10 +204,9 @@ class Steering:
         ctl.throttle, ctl.steering, ctl.lateral = throttle, steering, lateral
         if self.kind is VehicleKind.RUDDER:
             return throttle, -steering if throttle < 0 else steering
-        pair = _skid_mix(throttle, steering)
         if self.kind is VehicleKind.DIFF_THRUST:
-            return pair
-        return (*pair, *_skid_mix(lateral, steering))
+            return _skid_mix(throttle, steering)
+        return throttle, throttle, *_skid_mix(lateral, steering)
 
 
 def _skid_mix(common: float, differential: float) -> tuple[float, float]:
