@@ -83,6 +83,8 @@ class Steering:
         """Turn at ``rate`` [rad/s] at ``speed`` over ground along the heading [m/s]."""
         self.state.desired_heading = None
         self.state.pivoting = False
+        rate_max = math.radians(self.params.get("ATC_STR_RAT_MAX"))
+        rate = min(rate_max, max(-rate_max, rate))
         return self._mix(self._throttle(speed, nav, dt), self._steer_rate(rate, nav, dt), 0.0)
 
     def hold(
