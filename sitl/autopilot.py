@@ -85,7 +85,8 @@ class Autopilot:
         self.statustexts: list[tuple[Severity, str]] = []
         self.target: GuidedTarget | None = None
         self.target_time = 0.0  # when the target was last set [s]
-        self.target_reached = False  # a POSITION target was reached: loiter about it
+        self.target_reached = False  # a POSITION target was reached (or passed): loiter about it
+        self.target_origin = (0.0, 0.0)  # where the boat was when it got the POSITION target [m]
         self.hold_point: tuple[float, float] | None = None  # LOITER/stopped-GUIDED/RTL point [m]
         self.steering = Steering(kind, self.params)
         self.commands: tuple[float, ...] = self.steering.zero()  # latest actuator commands in [-1, 1]
@@ -154,19 +155,28 @@ class Autopilot:
         self.home_changed = True
         return MavResult.ACCEPTED
 
-    def set_guided_target(self, target: GuidedTarget, t: float) -> bool:
+    def set_guided_target(self, target: GuidedTarget, t: float, here: tuple[float, float] = (0.0, 0.0)) -> bool:
         """Accept a finite target only in GUIDED and armed (ArduPilot ignores it otherwise)."""
         if self.mode != MODE_NUMBERS["GUIDED"] or not self.armed or not target.is_finite():
             return False
         old = self.target
         if old is None or (old.kind, old.n, old.e) != (target.kind, target.n, target.e):
             self.target_reached = False  # a new destination (a resent one keeps its progress)
+            self.target_origin = here
         self.target = target
         self.target_time = t
         return True
 
     def say(self, severity: Severity, text: str) -> None:
         self.statustexts.append((severity, text))
+
+    def _arrived(self, point: tuple[float, float], nav: Navigation) -> bool:
+        """Within WP_RADIUS of ``point``, or past it along the track from where the target was given."""
+        dn, de = point[0] - nav.n, point[1] - nav.e
+        if math.hypot(dn, de) <= self.params.get("WP_RADIUS"):
+            return True
+        track_n, track_e = point[0] - self.target_origin[0], point[1] - self.target_origin[1]
+        return track_n * dn + track_e * de < 0.0  # the point is behind, seen along the track
 
     # ---- control ------------------------------------------------------------------------------
     def update(self, nav: Navigation, dt: float) -> tuple[float, ...]:

@@ -241,7 +241,7 @@ def _apply_setpoint(channel: Channel, msg: Any, frame: int, position: tuple[floa
     except SetpointRejected as exc:
         _reject(channel, str(exc))
         return
-    ap.set_guided_target(target, boat.t)
+    ap.set_guided_target(target, boat.t, (nav.n, nav.e))
 
 
 def _reject(channel: Channel, text: str) -> None:

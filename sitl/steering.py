@@ -8,15 +8,18 @@ ArduPilot Rover's attitude control:
   feed-forward (ATC_SPEED_P/I); a cross current is not corrected, it sets the boat sideways;
 - a desired speed of exactly zero is the stop controller: brake until slower than STOP_SPEED_MPS
   (ATC_STOP_SPEED), then throttle zero, so a stopped boat drifts with a weak current;
-- pivot turns (skid steering, DIFF_THRUST only): beyond WP_PIVOT_ANGLE of heading error the speed is
-  zero and the boat turns on the spot at up to WP_PIVOT_RATE, until within PIVOT_EXIT_RAD;
-- loiter: inside the radius the boat drifts (stop controller), outside it drives back toward the point
-  (forward or reverse by LOIT_TYPE) at LOIT_SPEED_GAIN x (distance - radius).
+- heading + speed targets (GUIDED velocity setpoints): steer and drive at once, no pivot logic (as
+  ArduPilot's HeadingAndSpeed submode);
+- driving to a point (GUIDED position targets, RTL, loiter outside its radius): forward or reverse by
+  LOIT_TYPE at LOIT_SPEED_GAIN x (distance - radius); the skid-steer boat (DIFF_THRUST) slows by
+  cos(heading error) and pivots beyond WP_PIVOT_ANGLE (zero speed, turn at up to WP_PIVOT_RATE, until
+  within PIVOT_EXIT_RAD), as ArduPilot's waypoint navigation does; inside the radius the boat drifts
+  (stop controller).
 
 Mixers (commands in [-1, 1], steering > 0 turns to starboard):
 - DIFF_THRUST (port, stbd) = (throttle + steering, throttle - steering), scaled back fairly when saturated;
-- RUDDER (throttle, rudder) = (throttle, +-steering), the rudder reversed when going astern (as
-  ArduPilot's regular steering does); a rudder turns the boat only with way through the water;
+- RUDDER (throttle, rudder) = (throttle, +-steering), the rudder reversed when the desired speed is
+  astern (not while braking); a rudder turns the boat only with way through the water;
 - VECTORED (port, stbd, bow, stern): the pair drives (throttle, throttle), the tunnel thrusters steer
   and push sideways (lateral +- steering), so it turns on the spot with a pure couple; the lateral
   channel is used only to hold a point (loiter), so in GUIDED it behaves like the others.
@@ -72,10 +75,13 @@ class Steering:
 
     # ---- guided demands ---------------------------------------------------------------------------
     def heading_speed(self, heading: float, speed: float, nav: Navigation, dt: float) -> tuple[float, ...]:
-        """Hold ``heading`` [rad] at ``speed`` over ground along it [m/s] (negative = astern)."""
-        error = wrap_pi(heading - nav.psi)
-        if self._pivot(error):
-            speed = 0.0
+        """Hold ``heading`` [rad] at ``speed`` over ground along it [m/s] (negative = astern).
+
+        No pivot logic here (ArduPilot's HeadingAndSpeed submode: calc_steering_to_heading and
+        calc_throttle only): the boat steers while it drives; at speed 0 the stop controller turns the
+        throttle off and a skid-steer or vectored boat turns on the spot.
+        """
+        self.state.pivoting = False
         steering = self._steer_to_heading(heading, nav, dt)
         return self._mix(self._throttle(speed, nav, dt), steering, 0.0)
 
@@ -205,7 +211,7 @@ class Steering:
         ctl = self.state
         ctl.throttle, ctl.steering, ctl.lateral = throttle, steering, lateral
         if self.kind is VehicleKind.RUDDER:
-            return throttle, -steering if throttle < 0 else steering
+            return throttle, -steering if ctl.desired_speed < 0 else steering  # astern on purpose, not braking
         if self.kind is VehicleKind.DIFF_THRUST:
             return _skid_mix(throttle, steering)
         return throttle, throttle, *_skid_mix(lateral, steering)

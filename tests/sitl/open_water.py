@@ -60,6 +60,7 @@ def fly(
     mask: int | None = None,
     velocity: tuple[float, float] = (0.0, 0.0),
     yaw: float = 0.0,
+    position: tuple[float, float] = (0.0, 0.0),
 ) -> np.ndarray:
     """Arm in ``mode`` (after the first position fix) and run the autopilot, resending a setpoint."""
     ap = boat.autopilot
@@ -75,8 +76,8 @@ def fly(
         if mask is not None and k % SETPOINT_EVERY == 0:
             nav = boat.navigation()
             cap = ap.params.get("WP_SPEED")
-            target = interpret_position_target(mask, Frame.LOCAL_NED, (0.0, 0.0), velocity, yaw, 0.0, nav, cap)
-            assert ap.set_guided_target(target, boat.t)
+            target = interpret_position_target(mask, Frame.LOCAL_NED, position, velocity, yaw, 0.0, nav, cap)
+            assert ap.set_guided_target(target, boat.t, (nav.n, nav.e))
         boat.physics_step(boat.t, DT)
         flow.advance(DT)
         if k % CONTROL_EVERY == CONTROL_EVERY - 1:

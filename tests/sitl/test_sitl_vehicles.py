@@ -3,7 +3,8 @@
 Open loop: steady speed and rise time, turning circle, turning with no way through the water, lateral
 thrust, drift with the current. Closed loop (the boat's own autopilot, no sockets): zero velocity means
 north, velocity + yaw holds a heading at speed 0 or reverses, speed is held over ground along the
-heading in a cross current, pivot turns only on the skid-steer boat, LOITER drifts inside LOIT_RADIUS.
+heading in a cross current, velocity setpoints are steered to while driving, pivot turns (toward a
+position) only on the skid-steer boat, LOITER drifts inside LOIT_RADIUS.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ FULL_TURN = {"diff_thrust": (1.0, 0.0), "rudder": (1.0, 1.0), "vectored": (1.0, 
 TURN_ON_THE_SPOT = {"diff_thrust": (1.0, -1.0), "rudder": (0.0, 1.0), "vectored": (0.0, 0.0, 1.0, -1.0)}
 # steady turning-circle diameter at the full-turn command [m] (measured; bounds +-15 %)
 TURNING_DIAMETER_M = {"diff_thrust": 3.75, "rudder": 2.07, "vectored": 2.03}
-VELOCITY, VELOCITY_YAW = 3559, 2535  # type masks
+VELOCITY, VELOCITY_YAW, POSITION = 3559, 2535, 0b110111111000  # type masks
 T, N, E, PSI, VN, VE = range(6)  # trajectory columns
 DIFF_PARAMS = make_boat("diff_thrust")[0].params
 RUDDER_PARAMS = make_boat("rudder")[0].params
@@ -158,18 +159,36 @@ def test_speed_is_held_over_ground_along_the_heading_and_a_cross_current_sets_th
     assert abs(heading_deg(traj)) < 3.0
 
 
-@pytest.mark.parametrize(("kind", "pivots"), [("diff_thrust", True), ("rudder", False), ("vectored", False)])
-def test_only_the_skid_steer_boat_pivots_before_driving(kind, pivots):
-    boat, flow = make_boat(kind)  # heading north, asked to go south
+@pytest.mark.parametrize("kind", KINDS)
+def test_a_velocity_setpoint_behind_is_steered_to_while_driving_no_pivot(kind):
+    boat, flow = make_boat(kind)  # heading north, asked to go south at 0.3 m/s (HeadingAndSpeed)
     traj = fly(boat, flow, 40.0, mask=VELOCITY, velocity=(-0.3, 0.0))
-    psi = np.degrees(np.abs(traj[:, PSI]))
+    error = 180.0 - np.degrees(np.abs(traj[:, PSI]))
     speed = np.hypot(traj[:, VN], traj[:, VE])
-    turning = psi < 120.0  # more than 60 deg from the desired heading (south)
-    if pivots:  # turns on the spot while the error exceeds WP_PIVOT_ANGLE (creeping, as above)
+    assert speed[error > 60.0].max() > 0.15  # it drives while the error is still large
+    assert abs(heading_deg(traj)) > 175.0 and np.mean(speed[-300:]) == pytest.approx(0.3, abs=0.02)
+
+
+@pytest.mark.parametrize(("kind", "pivots"), [("diff_thrust", True), ("rudder", False), ("vectored", False)])
+def test_only_the_skid_steer_boat_pivots_toward_a_position_target(kind, pivots):
+    boat, flow = make_boat(kind)  # heading north; the target lies 100 deg to starboard, 1.5 m away
+    bearing = math.radians(100.0)
+    goal = (1.5 * math.cos(bearing), 1.5 * math.sin(bearing))
+    traj = fly(boat, flow, 40.0, mask=POSITION, position=goal)
+    to_goal = np.degrees(np.arctan2(goal[1] - traj[:, E], goal[0] - traj[:, N]))
+    error = np.abs((to_goal - np.degrees(traj[:, PSI]) + 180.0) % 360.0 - 180.0)
+    speed = np.hypot(traj[:, VN], traj[:, VE])
+    turning = error > 70.0  # beyond WP_PIVOT_ANGLE (60 deg), with a margin for the exit at 10 deg
+    if pivots:  # turns on the spot (creeping as above) while the error exceeds WP_PIVOT_ANGLE
         assert speed[turning].max() < 1.05 * pivot_creep_mps(boat)
     else:
-        assert speed[turning].max() > 0.1  # drives while it turns
-    assert abs(heading_deg(traj)) > 175.0 and np.mean(speed[-300:]) == pytest.approx(0.3, abs=0.02)
+        assert speed[turning].max() > 0.05  # drives while it turns
+    distance = np.hypot(traj[:, N] - goal[0], traj[:, E] - goal[1])
+    # it gets there (within WP_RADIUS) or, the rudder boat, passes it no farther than its turning radius
+    assert distance.min() < (0.5 * TURNING_DIAMETER_M[kind] if kind == "rudder" else 0.1)
+    if kind != "rudder":  # ... and stops, loitering within LOIT_RADIUS
+        assert distance[-1] < boat.autopilot.params.get("LOIT_RADIUS") and speed[-1] < 0.02
+    # (a point inside the rudder boat's turning circle cannot be reached: it keeps circling near it)
 
 
 @pytest.mark.parametrize("kind", KINDS)
