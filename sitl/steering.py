@@ -6,8 +6,9 @@ ArduPilot Rover's attitude control:
   turn-rate PI with feed-forward (ATC_STR_RAT_FF/P/I), integrator frozen while saturated;
 - speed over ground ALONG THE HEADING -> throttle by a PI with CRUISE_SPEED/CRUISE_THROTTLE
   feed-forward (ATC_SPEED_P/I); a cross current is not corrected, it sets the boat sideways;
-- a desired speed of exactly zero is the stop controller: brake until slower than STOP_SPEED_MPS
-  (ATC_STOP_SPEED), then throttle zero, so a stopped boat drifts with a weak current;
+- a desired speed of exactly zero is the stop controller (AR_AttitudeControl::get_throttle_out_stop):
+  brake until slower than STOP_SPEED_MPS (ATC_STOP_SPEED), then throttle zero for as long as the
+  demand stays zero, so a stopped boat drifts with the current, whatever its speed;
 - heading + speed targets (GUIDED velocity setpoints): steer and drive at once, no pivot logic (as
   ArduPilot's HeadingAndSpeed submode);
 - driving to a point (GUIDED position targets, RTL, loiter outside its radius): forward or reverse by
@@ -56,6 +57,7 @@ class ControllerState:
     lateral: float = 0.0  # [-1, 1] (VECTORED)
     reversing: bool = False  # loiter is backing toward its point
     pivoting: bool = False  # a skid-steer pivot turn is under way
+    stopped: bool = False  # the stop controller has brought the boat below STOP_SPEED_MPS (latched)
 
 
 class Steering:
@@ -169,13 +171,19 @@ class Steering:
 
     def _throttle(self, speed: float, nav: Navigation, dt: float) -> float:
         """Speed over ground along the heading -> throttle; exactly zero speed is the stop controller."""
-        if speed == 0.0:
-            forward = nav.vn * math.cos(nav.psi) + nav.ve * math.sin(nav.psi)
-            if abs(forward) <= STOP_SPEED_MPS:  # stopped: throttle off, the boat drifts
-                self.state.desired_speed = 0.0
-                self.state.speed_integral = 0.0
-                return 0.0
-        return self._throttle_pi(speed, nav, dt)
+        ctl = self.state
+        if speed != 0.0:
+            ctl.stopped = False
+            return self._throttle_pi(speed, nav, dt)
+        forward = nav.vn * math.cos(nav.psi) + nav.ve * math.sin(nav.psi)
+        # ArduPilot's get_throttle_out_stop: stopped once slower than the stop speed, and it stays
+        # stopped (throttle off, the boat drifts with any current) while the demand stays zero
+        ctl.stopped = ctl.stopped or abs(forward) <= STOP_SPEED_MPS
+        if ctl.stopped:
+            ctl.desired_speed = 0.0
+            ctl.speed_integral = 0.0
+            return 0.0
+        return self._throttle_pi(0.0, nav, dt)
 
     def _throttle_pi(self, speed: float, nav: Navigation, dt: float) -> float:
         """Forward speed over ground PI with CRUISE_SPEED/CRUISE_THROTTLE feed-forward."""
@@ -198,7 +206,7 @@ class Steering:
         p = self.params
         ctl = self.state
         sideways = -nav.vn * math.sin(nav.psi) + nav.ve * math.cos(nav.psi)
-        if speed == 0.0 and abs(sideways) <= STOP_SPEED_MPS:
+        if speed == 0.0 and (ctl.stopped or abs(sideways) <= STOP_SPEED_MPS):
             ctl.lateral_integral = 0.0
             return 0.0
         error = speed - sideways

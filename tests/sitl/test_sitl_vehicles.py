@@ -203,3 +203,16 @@ def test_loiter_drifts_inside_loit_radius_and_drives_back_outside(kind):
     assert np.mean(inside[:, VE]) == pytest.approx(0.05, abs=0.01)  # drifting with the current
     assert 1.9 < distance.max() < 2.6  # driven back once outside
     assert distance[-1] < 2.6
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_speed_zero_brakes_then_the_boat_drifts_with_the_current(kind):
+    boat, flow = make_boat(kind, overrides=current(0.15, 0.0))  # faster than the 0.1 m/s stop speed
+    fly(boat, flow, 10.0, mask=VELOCITY, velocity=(0.3, 0.0))  # 0.3 m/s north over ground
+    traj = fly(boat, flow, 20.0, mask=VELOCITY_YAW, velocity=(0.0, 0.0), yaw=0.0)  # speed 0, keep north
+    vn = traj[:, VN]
+    assert np.argmax(vn <= 0.1) * 0.01 < 2.0  # braked below the stop speed (coasting never would here)
+    # then throttle off for good (ArduPilot's stop controller latches): carried along at the current
+    assert np.mean(vn[-300:]) == pytest.approx(0.15, abs=0.01)
+    assert boat.autopilot.control.throttle == 0.0 and boat.autopilot.control.stopped
+    assert abs(heading_deg(traj)) < 3.0  # still holding the heading
