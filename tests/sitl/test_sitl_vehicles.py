@@ -216,3 +216,35 @@ def test_speed_zero_brakes_then_the_boat_drifts_with_the_current(kind):
     assert np.mean(vn[-300:]) == pytest.approx(0.15, abs=0.01)
     assert boat.autopilot.control.throttle == 0.0 and boat.autopilot.control.stopped
     assert abs(heading_deg(traj)) < 3.0  # still holding the heading
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_velocity_and_yaw_over_mavlink_on_every_kind(gcs_and_sim, kind):
+    records: list[dict] = []
+    gcs, _ = gcs_and_sim({"vehicle": kind, "start_poses": [[2.25, 0.3, 60.0]]}, records)  # heading 060
+    gcs.mav.request_data_stream_send(1, 1, 6, 10, 1)  # POSITION at 10 Hz
+    gcs.wait_type("LOCAL_POSITION_NED")
+    assert gcs.set_mode(15).result == 0 and gcs.arm().result == 0
+    east = math.radians(90.0)
+    samples = []
+
+    def send(speed):
+        def each(m):
+            gcs.velocity(speed, 0.0, mask=VELOCITY_YAW, yaw=east)
+            if m.get_type() == "LOCAL_POSITION_NED":
+                samples.append((gcs.t, m.vx, m.vy))
+            elif m.get_type() == "ATTITUDE":
+                samples.append((gcs.t, m.yaw))
+
+        return each
+
+    gcs.run_for(12.0, send(0.15))  # heading east at 0.15 m/s (the rudder boat turns while it drives)
+    velocities = [s for s in samples if len(s) == 3][-10:]
+    assert np.mean([s[2] for s in velocities]) == pytest.approx(0.15, abs=0.03)
+    assert abs(np.mean([s[1] for s in velocities])) < 0.03
+    samples.clear()
+    gcs.run_for(8.0, send(0.0))  # speed 0, keep heading east: stops, does not turn north
+    yaws = [math.degrees(s[1]) for s in samples if len(s) == 2]
+    assert min(yaws) > 80.0 and max(yaws) < 100.0
+    assert math.hypot(*[np.mean([s[k] for s in samples if len(s) == 3][-10:]) for k in (1, 2)]) < 0.03
+    assert not [r for r in records if r["kind"] == "wall"]
