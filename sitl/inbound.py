@@ -87,7 +87,7 @@ def _command(channel: Channel, msg: Any) -> None:
     try:
         result = _run_command(channel, command, msg)
     except CommandDenied as exc:
-        log.info("boat %d: command %d denied: %s", boat.sysid, command, exc)
+        log.debug("boat %d: command %d denied: %s", boat.sysid, command, exc)
         result = MavResult.DENIED
     except (ValueError, ArithmeticError) as exc:  # a value no check foresaw: refuse it, keep running
         log.warning("boat %d: command %d failed: %s", boat.sysid, command, exc)
@@ -288,8 +288,7 @@ def _param_set(channel: Channel, msg: Any) -> None:
         return
     value = float(msg.param_value)
     if not params.set(name, value):
-        spec = PARAMS[name]
-        channel.boat.autopilot.say(Severity.WARNING, f"{name} {value:g} refused: must be {spec.describe()}"[:50])
+        _reject(channel, f"{name} {value:g} refused: must be {PARAMS[name].describe()}"[:50])
         channel.publish()
     _param_value(channel, name)  # the value now in force (unchanged if the new one was refused)
 
