@@ -1,8 +1,9 @@
 """One simulated boat: its state, thrusters, sensors and autopilot, stepped in simulated time.
 
 The state vector follows sitl.vessel (eta = [N, E, psi] in local NED, nu_r = [u_r, v_r, r] relative to
-the water, propeller speeds). The boat integrates its own equations of motion with RK4 through the
-shared flow, stays inside the tank, and runs its autopilot at the control rate. It does no I/O.
+the water, then the actuator states of the boat's kind, sitl.vehicles). The boat integrates its own
+equations of motion with RK4 through the shared flow, stays inside the tank, and runs its autopilot at
+the control rate. It does no I/O.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ from sitl.config import SitlConfig
 from sitl.flow import Flow
 from sitl.integrate import rk4_step
 from sitl.sensors import Sensors, Truth, wrap_pi
-from sitl.vessel import State, VesselParams, ground_velocity, propeller_command, state_derivative, thrust
+from sitl.vehicles import VehicleParams, actuator_demands, derivative, initial_actuators, thrusts
+from sitl.vessel import State, ground_velocity
 from sitl.world import WALL_RELEASE_M, Tank, WallContact
 
 
@@ -33,7 +35,7 @@ class Boat:
         self,
         sysid: int,
         cfg: SitlConfig,
-        params: VesselParams,
+        params: VehicleParams,
         flow: Flow,
         tank: Tank,
         pose: tuple[float, float, float],
@@ -49,9 +51,9 @@ class Boat:
                 f"start pose of boat {sysid}: ({n}, {e}) m is outside the tank walls "
                 f"(north {tank.n_min:.2f}..{tank.n_max:.2f}, east {tank.e_min:.2f}..{tank.e_max:.2f} m)"
             )
-        self.state: State = (n, e, wrap_pi(math.radians(heading_deg)), 0.0, 0.0, 0.0, 0.0, 0.0)
+        self.state: State = (n, e, wrap_pi(math.radians(heading_deg)), 0.0, 0.0, 0.0, *initial_actuators(params))
         self.sensors = Sensors(cfg.sensors, rng)
-        self.autopilot = Autopilot(cfg.autopilot, home=(n, e))
+        self.autopilot = Autopilot(cfg.autopilot, home=(n, e), kind=params.kind)
         self.wall: WallContact | None = None
         self.wall_events: list[WallEvent] = []
         self.t = 0.0
@@ -60,18 +62,16 @@ class Boat:
 
     # ---- simulation ---------------------------------------------------------------------------
     def physics_step(self, t: float, dt: float) -> None:
-        """Advance the boat from t to t + dt [s] (RK4; the thruster commands are held)."""
+        """Advance the boat from t to t + dt [s] (RK4; the actuator commands are held)."""
         p = self.params
-        port, stbd = self.autopilot.commands
-        n1c = propeller_command(port, p)
-        n2c = propeller_command(stbd, p)
+        demands = actuator_demands(self.autopilot.commands, p)
         velocity = self.flow.velocity
 
-        def derivative(tt: float, x: State) -> State:
+        def x_dot(tt: float, x: State) -> State:
             vc_n, vc_e = velocity(x[0], x[1], tt)
-            return state_derivative(x, n1c, n2c, vc_n, vc_e, p)
+            return derivative(x, demands, vc_n, vc_e, p)
 
-        x = rk4_step(derivative, t, self.state, dt)
+        x = rk4_step(x_dot, t, self.state, dt)
         self.t = t + dt
         if not self.tank.contains(x[0], x[1]):
             x = self._stop_at_wall(x)
@@ -96,9 +96,7 @@ class Boat:
         if self.wall is None or set(contact.walls) - set(self.wall.walls):
             event = WallEvent(self.t, self.sysid, contact)
             self.wall_events.append(event)
-            self.autopilot.say(
-                Severity.WARNING, f"Wall contact: {'+'.join(contact.walls)} wall at N {n:.2f} E {e:.2f}"
-            )
+            self.autopilot.say(Severity.WARNING, f"Wall contact: {'+'.join(contact.walls)} wall at N {n:.2f} E {e:.2f}")
         self.wall = contact
         return (n, e, x[2], c * dn + s * de, -s * dn + c * de, *x[5:])
 
@@ -126,9 +124,9 @@ class Boat:
             self.sensors.position_healthy(t),
         )
 
-    def thrusts(self) -> tuple[float, float]:
-        """Current thrust of the port and starboard thrusters [N]."""
-        return thrust(self.state[6], self.params), thrust(self.state[7], self.params)
+    def thrusts(self) -> tuple[float, ...]:
+        """Current thrust of each propeller [N], in sitl.vehicles.thrusts order."""
+        return thrusts(self.state, self.params)
 
     def flow_here(self) -> tuple[float, float]:
         """Water velocity at the boat (V_N, V_E) [m/s]."""

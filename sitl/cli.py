@@ -45,6 +45,8 @@ SITL_FLAGS: tuple[Flag, ...] = (
     Flag("--flow", "flow.kinds", name_list, "none, uniform, vortex, double_gyre, gusts; comma-separated to sum",
          metavar="KIND"),
     Flag("--count", "count", int, "number of boats (system ids 1..N)", metavar="N"),
+    Flag("--vehicle", "vehicles", name_list, "diff_thrust (default), rudder or vectored; comma-separated for one "
+         "kind per boat", metavar="KIND"),
     Flag("--seed", "seed", int, "random seed for flow and sensor noise", metavar="N"),
     Flag("--duration", "duration_s", float, "stop after S simulated seconds", metavar="S"),
     Flag("--record", "recorder.path", str, "write ground truth as JSON lines to FILE", metavar="FILE"),
@@ -58,8 +60,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def overrides(args: argparse.Namespace) -> dict[str, Any]:
-    """Config overrides from the flags that were given."""
-    return overrides_from(args, SITL_FLAGS)
+    """Config overrides from the flags that were given (one ``--vehicle`` kind is every boat's ``vehicle``)."""
+    out = overrides_from(args, SITL_FLAGS)
+    if len(out.get("vehicles", ())) == 1:
+        out["vehicle"] = out.pop("vehicles")[0]
+    return out
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -27,6 +27,14 @@ class FlowKind(enum.Enum):
     GUSTS = "gusts"
 
 
+class VehicleKind(enum.Enum):
+    """How a boat is propelled and steered (sitl.vehicles)."""
+
+    DIFF_THRUST = "diff_thrust"  # two fixed stern thrusters, skid steering, pivot turns
+    RUDDER = "rudder"  # one centreline thruster and a rudder: no steering without way through the water
+    VECTORED = "vectored"  # the thruster pair plus bow and stern tunnel thrusters: can thrust sideways
+
+
 class RoverMode(enum.Enum):
     """ArduPilot Rover mode numbers (HEARTBEAT custom_mode) that the simulator can enter."""
 
@@ -64,9 +72,29 @@ class ThrusterConfig:
 
 
 @dataclass(frozen=True)
+class RudderConfig:
+    """The rudder boat: one centreline propeller with the pair's total thrust, and a stern rudder."""
+
+    max_angle_deg: float  # rudder deflection at full steering command [deg]
+    time_constant_s: float  # first-order lag of the rudder servo [s]
+    lift_slope_kgpm: float  # Y_delta = 1/2 rho A_R C_L_alpha: sway force per (m/s)^2 and rad [kg/m]
+    position_m: float  # x_R, rudder position along the body x axis (negative = aft) [m]
+
+
+@dataclass(frozen=True)
+class LateralThrusterConfig:
+    """The vectored boat's bow and stern tunnel thrusters (sway force and yaw moment)."""
+
+    max_thrust_n: float  # thrust of one tunnel thruster at full command, either way [N]
+    lever_m: float  # distance of each tunnel thruster from the centre of gravity along x [m]
+
+
+@dataclass(frozen=True)
 class VesselConfig:
     hull: HullConfig
     thrusters: ThrusterConfig
+    rudder: RudderConfig
+    lateral_thrusters: LateralThrusterConfig
 
 
 @dataclass(frozen=True)
@@ -160,6 +188,9 @@ class AutopilotParams:
     steer_rate_i: float  # ATC_STR_RAT_I: integrated turn-rate error -> steering [1/rad]
     steer_rate_max_degps: float  # ATC_STR_RAT_MAX: turn-rate cap [deg/s]
     steer_angle_p: float  # ATC_STR_ANG_P: heading error -> desired turn rate [1/s]
+    pivot_angle_deg: float  # WP_PIVOT_ANGLE: skid steering pivots beyond this heading error; 0 = never [deg]
+    pivot_rate_degps: float  # WP_PIVOT_RATE: turn-rate cap while pivoting [deg/s]
+    wp_radius_m: float  # WP_RADIUS: a guided position target is reached within this distance [m]
     loiter_radius_m: float  # LOIT_RADIUS: no correction inside this distance [m]
     loiter_speed_gain: float  # LOIT_SPEED_GAIN: distance beyond the radius -> speed [1/s]
     loiter_type: float  # LOIT_TYPE: 0 forward or reverse, 1 forward only, 2 reverse only [-]
@@ -210,6 +241,8 @@ class SitlConfig:
     duration_s: float | None  # stop after this much simulated time; null runs until interrupted [s]
     unix_time_at_boot_s: float | None  # SYSTEM_TIME epoch at simulated t = 0; null = wall clock at start [s]
     start_poses: tuple[tuple[float, float, float], ...]  # per boat [N m, E m, heading deg]; [] = a row
+    vehicle: VehicleKind  # the kind of every boat not listed in ``vehicles``
+    vehicles: tuple[VehicleKind, ...]  # per boat (system ids 1..count); [] = all ``vehicle``
     vessel: VesselConfig
     flow: FlowConfig
     world: WorldConfig
@@ -258,13 +291,32 @@ def validate(cfg: SitlConfig) -> None:
             f"start_poses: {len(cfg.start_poses)} poses given for count = {cfg.count} boats "
             "(give one [N, E, heading_deg] per boat, or [] for an automatic row)"
         )
+    if cfg.vehicles and len(cfg.vehicles) != cfg.count:
+        raise ConfigError(
+            f"vehicles: {len(cfg.vehicles)} kinds given for count = {cfg.count} boats "
+            "(give one kind per boat, or [] for all `vehicle`)"
+        )
+    rudder, lateral = cfg.vessel.rudder, cfg.vessel.lateral_thrusters
+    for key, value in (
+        ("vessel.rudder.time_constant_s", rudder.time_constant_s),
+        ("vessel.rudder.lift_slope_kgpm", rudder.lift_slope_kgpm),
+        ("vessel.lateral_thrusters.max_thrust_n", lateral.max_thrust_n),
+        ("vessel.lateral_thrusters.lever_m", lateral.lever_m),
+    ):
+        if not value > 0:
+            raise ConfigError(f"{key}: must be positive, got {value!r}")
+    if not 0.0 < rudder.max_angle_deg <= 60.0:
+        raise ConfigError(f"vessel.rudder.max_angle_deg: must be in (0, 60] deg, got {rudder.max_angle_deg!r}")
+    if not rudder.position_m < 0:
+        raise ConfigError(f"vessel.rudder.position_m: the rudder must be aft (negative), got {rudder.position_m!r}")
+    from sitl.parameters import check_config_params  # here: sitl.parameters imports this module
+
+    check_config_params(cfg.autopilot.params)
     dropout = cfg.sensors.position.dropout_probability
     if not 0.0 <= dropout < 1.0:
         raise ConfigError(f"sensors.position.dropout_probability: must be in [0, 1), got {dropout!r}")
     if FlowKind.NONE in cfg.flow.kinds and len(cfg.flow.kinds) > 1:
-        raise ConfigError(
-            f"flow.kinds: 'none' cannot be combined with other kinds, got {_values(cfg.flow.kinds)}"
-        )
+        raise ConfigError(f"flow.kinds: 'none' cannot be combined with other kinds, got {_values(cfg.flow.kinds)}")
     for axis in ("north_m", "east_m"):
         lo, hi = getattr(cfg.world, axis)
         if not hi > lo:

@@ -3,6 +3,13 @@
 A ``Channel`` is one boat on one link: replies (COMMAND_ACK, PARAM_VALUE, requested messages) go back
 on the channel a request came in on. Messages addressed to another system (target_system not 0 and not
 this boat) or another component are ignored. Setpoints are honoured only in GUIDED while armed.
+
+Nothing a client sends can crash the simulator or drive a boat by accident: every command parameter
+the simulator reads is checked against its MAVLink range first (NaN, inf, fractions where a whole
+number is meant, out of range -> COMMAND_ACK DENIED and nothing changes); PARAM_SET outside a
+parameter's range (sitl.parameters) changes nothing; a setpoint with a NaN/inf in a field it uses, or
+an impossible position, is ignored (sitl.guided). Should a handler still meet a value it cannot use,
+the command is answered FAILED and the link stays open.
 """
 
 from __future__ import annotations
@@ -25,12 +32,16 @@ from sitl.autopilot import (
 )
 from sitl.boat import Boat
 from sitl.config import OriginConfig
+from sitl.guided import POS_IGNORE
 from sitl.mavlink_endpoint import Link
+from sitl.parameters import PARAMS
 from sitl.telemetry import StreamSchedule, TelemetryWriter
 
 log = logging.getLogger(__name__)
 
 FORCE_ARM_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2 that skips pre-arm checks
+MAX_MESSAGE_ID = (1 << 24) - 1  # MAVLink 2 message ids are 24 bits
+MAX_INTERVAL_US = 1e9  # SET_MESSAGE_INTERVAL: at most one message per 1000 s [us]
 REJECTION_TEXT_INTERVAL_S = 1.0  # at most one "setpoint ignored" STATUSTEXT per second per boat
 GLOBAL_INT_FRAMES = frozenset({Frame.GLOBAL_INT, Frame.GLOBAL_RELATIVE_ALT_INT, Frame.GLOBAL_TERRAIN_ALT_INT})
 
@@ -72,11 +83,16 @@ def handle(channel: Channel, msg: Any) -> None:
 def _command(channel: Channel, msg: Any) -> None:
     boat = channel.boat
     command = msg.command
-    result = _run_command(channel, command, msg)
+    try:
+        result = _run_command(channel, command, msg)
+    except CommandDenied as exc:
+        log.debug("boat %d: command %d denied: %s", boat.sysid, command, exc)
+        result = MavResult.DENIED
+    except (ValueError, ArithmeticError) as exc:  # a value no check foresaw: refuse it, keep running
+        log.warning("boat %d: command %d failed: %s", boat.sysid, command, exc)
+        result = MavResult.FAILED
     channel.publish()
-    channel.writer.mav.command_ack_send(
-        command, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
-    )
+    channel.writer.mav.command_ack_send(command, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
     # requested messages go out after the ACK, as ArduPilot does
     if result == MavResult.ACCEPTED:
         requested = _requested_message(command, msg)
@@ -85,9 +101,26 @@ def _command(channel: Channel, msg: Any) -> None:
     log.debug("boat %d: command %d -> %s", boat.sysid, command, MavResult(result).name)
 
 
+class CommandDenied(ValueError):
+    """A command parameter outside its MAVLink range; the text names it and the value seen."""
+
+
+def _whole(value: float, low: float, high: float, what: str) -> int:
+    """``value`` as an int if it is a whole number in [low, high], else CommandDenied."""
+    if not (math.isfinite(value) and value == round(value) and low <= value <= high):
+        raise CommandDenied(f"{what} must be a whole number in [{low:g}, {high:g}], got {value!r}")
+    return int(value)
+
+
+def _finite(value: float, low: float, high: float, what: str) -> float:
+    if not (math.isfinite(value) and low <= value <= high):
+        raise CommandDenied(f"{what} must be in [{low:g}, {high:g}], got {value!r}")
+    return value
+
+
 def _requested_message(command: int, msg: Any) -> int | None:
     if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
-        return int(msg.param1)
+        return _whole(msg.param1, 0, MAX_MESSAGE_ID, "param1 (message id)")
     if command == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
         return mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
     if command == mavlink.MAV_CMD_GET_HOME_POSITION:
@@ -96,50 +129,63 @@ def _requested_message(command: int, msg: Any) -> int | None:
 
 
 def _run_command(channel: Channel, command: int, msg: Any) -> MavResult:
+    """Run one command; raises CommandDenied for a parameter outside its range (nothing changed)."""
     boat = channel.boat
     ap = boat.autopilot
     nav = boat.navigation()
     if command == mavlink.MAV_CMD_DO_SET_MODE:
-        if not int(msg.param1) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        base_mode = _whole(msg.param1, 0, 255, "param1 (base mode)")
+        custom_mode = _whole(msg.param2, 0, 0xFFFFFFFF, "param2 (custom mode)")
+        if not base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             return MavResult.UNSUPPORTED
-        return ap.set_mode(int(msg.param2), nav)
+        return ap.set_mode(custom_mode, nav)
     if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-        if msg.param1 not in (0.0, 1.0):
-            return MavResult.DENIED
-        return ap.arm(msg.param1 == 1.0, int(msg.param2) == FORCE_ARM_MAGIC, nav)
+        arm = _whole(msg.param1, 0, 1, "param1 (arm)")
+        return ap.arm(arm == 1, msg.param2 == FORCE_ARM_MAGIC, nav)
     if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
         return ap.set_mode(MODE_NUMBERS["RTL"], nav)
     if command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-        msg_id = int(msg.param1)
+        msg_id = _whole(msg.param1, 0, MAX_MESSAGE_ID, "param1 (message id)")
+        interval_us = _finite(msg.param2, -1.0, MAX_INTERVAL_US, "param2 (interval, us)")
+        if -1.0 < interval_us < 0.0:
+            raise CommandDenied(f"param2 (interval, us) must be -1, 0 or positive, got {interval_us!r}")
         if msg_id not in channel.writer.senders:
             return MavResult.UNSUPPORTED
-        interval_us = msg.param2
         interval = None if interval_us == 0 else (0.0 if interval_us < 0 else interval_us / 1e6)
         channel.schedule.set_interval(msg_id, interval, boat.t)
         return MavResult.ACCEPTED
     if command == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
-        msg_id = int(msg.param1)
+        msg_id = _whole(msg.param1, 0, MAX_MESSAGE_ID, "param1 (message id)")
         if msg_id not in channel.writer.senders:
             return MavResult.UNSUPPORTED
         interval = channel.schedule.intervals.get(msg_id, 0.0)
         channel.writer.mav.message_interval_send(msg_id, round(interval * 1e6) if interval > 0 else -1)
         return MavResult.ACCEPTED
     if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
-        return MavResult.ACCEPTED if int(msg.param1) in channel.writer.senders else MavResult.UNSUPPORTED
+        msg_id = _whole(msg.param1, 0, MAX_MESSAGE_ID, "param1 (message id)")
+        return MavResult.ACCEPTED if msg_id in channel.writer.senders else MavResult.UNSUPPORTED
     if command in (mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, mavlink.MAV_CMD_GET_HOME_POSITION):
         return MavResult.ACCEPTED
     if command == mavlink.MAV_CMD_DO_SET_HOME:
-        if msg.param1 == 1.0:
-            if not nav.position_ok:
-                return MavResult.FAILED
-            ap.set_home(nav.n, nav.e)
-        else:
-            lat, lon = (
-                (msg.x / 1e7, msg.y / 1e7) if msg.get_type() == "COMMAND_INT" else (msg.param5, msg.param6)
-            )
-            ap.set_home(*geodetic_to_ned(lat, lon, channel.origin.latitude_deg, channel.origin.longitude_deg))
-        return MavResult.ACCEPTED
+        return _set_home(channel, msg, nav)
     return MavResult.UNSUPPORTED
+
+
+def _set_home(channel: Channel, msg: Any, nav: Any) -> MavResult:
+    """DO_SET_HOME: param1 1 = here, 0 = the latitude/longitude given (checked like check_latlng)."""
+    ap = channel.boat.autopilot
+    if _whole(msg.param1, 0, 1, "param1 (use current location)") == 1:
+        if not nav.position_ok:
+            return MavResult.FAILED
+        return ap.set_home(nav.n, nav.e)
+    if msg.get_type() == "COMMAND_INT":
+        lat = _whole(msg.x, -90e7, 90e7, "x (latitude, degE7)") / 1e7
+        lon = _whole(msg.y, -180e7, 180e7, "y (longitude, degE7)") / 1e7
+    else:
+        lat = _finite(msg.param5, -90.0, 90.0, "param5 (latitude, deg)")
+        lon = _finite(msg.param6, -180.0, 180.0, "param6 (longitude, deg)")
+    origin = channel.origin
+    return ap.set_home(*geodetic_to_ned(lat, lon, origin.latitude_deg, origin.longitude_deg))
 
 
 def _set_mode(channel: Channel, msg: Any) -> None:
@@ -162,9 +208,12 @@ def _position_target_local(channel: Channel, msg: Any) -> None:
 
 def _position_target_global(channel: Channel, msg: Any) -> None:
     if msg.coordinate_frame not in GLOBAL_INT_FRAMES:
-        _reject(
-            channel, f"SET_POSITION_TARGET_GLOBAL_INT frame {msg.coordinate_frame} not supported, ignored"
-        )
+        _reject(channel, f"SET_POSITION_TARGET_GLOBAL_INT frame {msg.coordinate_frame} not supported, ignored")
+        return
+    if msg.type_mask & POS_IGNORE != POS_IGNORE and not (
+        abs(msg.lat_int) <= 90e7 and abs(msg.lon_int) <= 180e7
+    ):  # ArduPilot's check_latlng: the message is ignored
+        _reject(channel, f"SET_POSITION_TARGET_GLOBAL_INT lat/lon {msg.lat_int}, {msg.lon_int} invalid, ignored")
         return
     origin = channel.origin
     n, e = geodetic_to_ned(msg.lat_int / 1e7, msg.lon_int / 1e7, origin.latitude_deg, origin.longitude_deg)
@@ -191,7 +240,7 @@ def _apply_setpoint(channel: Channel, msg: Any, frame: int, position: tuple[floa
     except SetpointRejected as exc:
         _reject(channel, str(exc))
         return
-    ap.set_guided_target(target, boat.t)
+    ap.set_guided_target(target, boat.t, (nav.n, nav.e))
 
 
 def _reject(channel: Channel, text: str) -> None:
@@ -236,8 +285,11 @@ def _param_set(channel: Channel, msg: Any) -> None:
     if name not in params:
         log.debug("boat %d: PARAM_SET of unknown %r ignored", channel.boat.sysid, name)
         return
-    params.set(name, float(msg.param_value))
-    _param_value(channel, name)  # the value now in force (unchanged if the new one was not finite)
+    value = float(msg.param_value)
+    if not params.set(name, value):
+        _reject(channel, f"{name} {value:g} refused: must be {PARAMS[name].describe()}"[:50])
+        channel.publish()
+    _param_value(channel, name)  # the value now in force (unchanged if the new one was refused)
 
 
 def _param_name(param_id: str | bytes) -> str:

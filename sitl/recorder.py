@@ -28,14 +28,12 @@ def state_record(boat: Boat) -> dict[str, Any]:
     truth = boat.truth()
     target = None
     if ap.target is not None:
-        target = {
-            k: (val.value if hasattr(val, "value") else val)
-            for k, val in dataclasses.asdict(ap.target).items()
-        }
+        target = {k: (val.value if hasattr(val, "value") else val) for k, val in dataclasses.asdict(ap.target).items()}
     return {
         "kind": "state",
         "t": round(boat.t, 9),
         "sysid": boat.sysid,
+        "vehicle": boat.params.kind.value,
         "n": x[0],
         "e": x[1],
         "psi": x[2],
@@ -83,9 +81,7 @@ class Recorder:
         self.write(state_record(boat))
 
     def statustext(self, t: float, sysid: int, severity: int, text: str) -> None:
-        self.write(
-            {"kind": "statustext", "t": round(t, 9), "sysid": sysid, "severity": severity, "text": text}
-        )
+        self.write({"kind": "statustext", "t": round(t, 9), "sysid": sysid, "severity": severity, "text": text})
 
     def wall(self, event: WallEvent) -> None:
         c = event.contact

@@ -40,7 +40,7 @@ from sitl.flow import Flow
 from sitl.mavlink_endpoint import Link, open_link
 from sitl.recorder import Recorder
 from sitl.telemetry import StreamSchedule, TelemetryWriter, default_intervals
-from sitl.vessel import VesselParams
+from sitl.vehicles import VehicleParams
 from sitl.world import Tank
 
 log = logging.getLogger(__name__)
@@ -72,19 +72,18 @@ class Simulation:
         self.record_every = max(1, round(cfg.physics_rate_hz / cfg.recorder.rate_hz))
         seeds = np.random.SeedSequence(cfg.seed).spawn(cfg.count + 1)
         self.flow = Flow(cfg.flow, np.random.default_rng(seeds[0]))
-        params = VesselParams.from_config(cfg.vessel)
-        self.tank = Tank(cfg.world, margin_m=0.5 * params.length_m)
+        kinds = cfg.vehicles or (cfg.vehicle,) * cfg.count
+        params = {kind: VehicleParams.from_config(cfg.vessel, kind) for kind in set(kinds)}
+        self.tank = Tank(cfg.world, margin_m=0.5 * cfg.vessel.hull.length_m)
         self.boats = [
-            Boat(k + 1, cfg, params, self.flow, self.tank, pose, np.random.default_rng(seeds[k + 1]))
-            for k, pose in enumerate(start_poses(cfg, self.tank))
+            Boat(k + 1, cfg, params[kind], self.flow, self.tank, pose, np.random.default_rng(seeds[k + 1]))
+            for k, (pose, kind) in enumerate(zip(start_poses(cfg, self.tank), kinds, strict=True))
         ]
         self.recorder = recorder
         self.links: list[Link] = []
         self.signing_key: SigningKey | None = None
         self.channels: dict[tuple[int, int], inbound.Channel] = {}  # (id(link), sysid) -> channel
-        self.unix_time_at_boot_s = (
-            cfg.unix_time_at_boot_s if cfg.unix_time_at_boot_s is not None else time.time()
-        )
+        self.unix_time_at_boot_s = cfg.unix_time_at_boot_s if cfg.unix_time_at_boot_s is not None else time.time()
         self.steps = 0
         self._stop = asyncio.Event()
         self.wall_time_running_s = 0.0  # wall time spent inside run() [s]
@@ -118,9 +117,7 @@ class Simulation:
         self.links.append(link)
         intervals = default_intervals(self.cfg.mavlink.streams)
         for boat in boats:
-            writer = TelemetryWriter(
-                boat, link.encoders[boat.sysid], self.cfg.origin, self.unix_time_at_boot_s
-            )
+            writer = TelemetryWriter(boat, link.encoders[boat.sysid], self.cfg.origin, self.unix_time_at_boot_s)
             schedule = StreamSchedule(intervals, 1.0 / self.cfg.mavlink.heartbeat_hz, self.t)
             self.channels[(id(link), boat.sysid)] = inbound.Channel(
                 boat, link, writer, schedule, self.cfg.origin, self._publish

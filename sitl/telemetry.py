@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from koopguide.base.geodesy import ned_to_geodetic
 from koopguide.mavlink.wire import mavlink
 from sitl.autopilot import AUTOPILOT_MODES, MANUAL_INPUT_MODES
-from sitl.config import OriginConfig, StreamRates
+from sitl.config import OriginConfig, StreamRates, VehicleKind
 
 if TYPE_CHECKING:
     from sitl.boat import Boat
@@ -40,6 +40,15 @@ STREAM_GROUPS: dict[str, tuple[int, tuple[int, ...]]] = {
 }
 
 # SYS_STATUS sensor bits (MAV_SYS_STATUS_SENSOR) that MAVSDK and ground stations read.
+# SERVO_OUTPUT_RAW outputs (1-based) per actuator command, as ArduPilot boats are wired by default:
+# skid steering SERVO1 ThrottleLeft / SERVO3 ThrottleRight; a rudder boat SERVO1 GroundSteering /
+# SERVO3 Throttle; the vectored boat's bow and stern tunnel thrusters on SERVO5 / SERVO6.
+SERVO_OUTPUTS = {
+    VehicleKind.DIFF_THRUST: (1, 3),
+    VehicleKind.RUDDER: (3, 1),
+    VehicleKind.VECTORED: (1, 3, 5, 6),
+}
+
 SENSOR_GYRO = 0x1
 SENSOR_ACCEL = 0x2
 SENSOR_MAG = 0x4
@@ -48,13 +57,7 @@ SENSOR_MOTOR_OUTPUTS = 0x8000
 SENSOR_AHRS = 0x200000
 SENSOR_PREARM_CHECK = 0x10000000
 SENSORS_PRESENT = (
-    SENSOR_GYRO
-    | SENSOR_ACCEL
-    | SENSOR_MAG
-    | SENSOR_GPS
-    | SENSOR_MOTOR_OUTPUTS
-    | SENSOR_AHRS
-    | SENSOR_PREARM_CHECK
+    SENSOR_GYRO | SENSOR_ACCEL | SENSOR_MAG | SENSOR_GPS | SENSOR_MOTOR_OUTPUTS | SENSOR_AHRS | SENSOR_PREARM_CHECK
 )
 
 # EKF_STATUS_REPORT flags for a healthy horizontal solution.
@@ -153,9 +156,7 @@ class TelemetryWriter:
         healthy = SENSOR_GYRO | SENSOR_ACCEL | SENSOR_MAG | SENSOR_MOTOR_OUTPUTS
         if self._healthy():
             healthy |= SENSOR_GPS | SENSOR_AHRS | SENSOR_PREARM_CHECK
-        self.mav.sys_status_send(
-            SENSORS_PRESENT, SENSORS_PRESENT, healthy, 150, 7400, -1, 100, 0, 0, 0, 0, 0, 0
-        )
+        self.mav.sys_status_send(SENSORS_PRESENT, SENSORS_PRESENT, healthy, 150, 7400, -1, 100, 0, 0, 0, 0, 0, 0)
 
     def gps_raw_int(self) -> None:
         n, e, vn, ve = self._fix()
@@ -219,13 +220,11 @@ class TelemetryWriter:
         self.mav.ekf_status_report_send(flags, 0.01, 0.01, 0.0, 0.01, 0.0)
 
     def servo_output_raw(self) -> None:
-        port, stbd = self.boat.autopilot.commands
-        pwm_port = round(1500 + 500 * port)
-        pwm_stbd = round(1500 + 500 * stbd)
-        # SERVO1 = ThrottleLeft, SERVO3 = ThrottleRight, as an ArduPilot skid-steer boat is wired
-        self.mav.servo_output_raw_send(
-            time_usec(self.boat.t) & 0xFFFFFFFF, 0, pwm_port, 0, pwm_stbd, 0, 0, 0, 0, 0
-        )
+        """Actuator commands as PWM [us] on the servo outputs an ArduPilot boat of this kind uses."""
+        pwm = [0] * 8
+        for servo, command in zip(SERVO_OUTPUTS[self.boat.params.kind], self.boat.autopilot.commands, strict=True):
+            pwm[servo - 1] = round(1500 + 500 * command)
+        self.mav.servo_output_raw_send(time_usec(self.boat.t) & 0xFFFFFFFF, 0, *pwm)
 
     def home_position(self) -> None:
         n, e = self.boat.autopilot.home

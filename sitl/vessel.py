@@ -1,7 +1,8 @@
 """Boat parameters and equations of motion: a 3-DOF manoeuvring model in Fossen's form.
 
 Conventions (this module, all pure functions, no I/O):
-  state x = (N, E, psi, u_r, v_r, r, n_port, n_stbd), a tuple of 8 floats:
+  state x = (N, E, psi, u_r, v_r, r, actuators...), a tuple of floats (sitl.vehicles lists the actuator
+  states per vehicle kind; the differential-thrust boat's are n = (n_port, n_stbd)):
     eta  = (N, E, psi): position in local NED [m], heading from north, clockwise seen from above [rad]
     nu_r = (u_r, v_r, r): velocity relative to the water in the body frame (surge forward, sway to
            starboard) [m/s], and yaw rate [rad/s]; nu = nu_r + nu_c is the velocity over ground
@@ -16,7 +17,8 @@ with the centre of gravity at the body origin (x_g = 0) and diagonal M, so that
     M = diag(m - X_udot, m - Y_vdot, I_z - N_rdot)
     C(nu_r) = C_RB + C_A = [[0, 0, -M22 v_r], [0, 0, M11 u_r], [M22 v_r, -M11 u_r, 0]]
     D(nu_r) = -diag(X_u + X_|u|u |u_r|, Y_v + Y_|v|v |v_r|, N_r + N_|r|r |r|)
-Two stern thrusters at y = -l (port) and y = +l (starboard):
+The body force tau comes from the vehicle's actuators (sitl.vehicles); the default differential-thrust
+boat has two stern thrusters at y = -l (port) and y = +l (starboard):
     T_i = k n_i |n_i|, k = k_fwd for n_i >= 0 else k_rev
     tau = (T_port + T_stbd, 0, l (T_port - T_stbd))
     n_i_dot = (n_cmd_i - n_i) / T_n      (first-order motor lag; n_cmd saturated at +-n_max)
@@ -30,7 +32,7 @@ from dataclasses import dataclass
 
 from sitl.config import VesselConfig
 
-State = tuple[float, float, float, float, float, float, float, float]
+State = tuple[float, ...]  # (N, E, psi, u_r, v_r, r, actuator states...); 8 entries for diff thrust
 
 
 @dataclass(frozen=True)
@@ -98,32 +100,40 @@ def propeller_command(command: float, p: VesselParams) -> float:
     return math.copysign(p.n_max * math.sqrt(abs(c)), c)
 
 
-def state_derivative(
-    x: State, n_cmd_port: float, n_cmd_stbd: float, vc_n: float, vc_e: float, p: VesselParams
-) -> State:
-    """x_dot for state x, propeller demands [rev/s] and the current (vc_n, vc_e) at the boat [m/s].
+def rigid_body_derivative(
+    x: tuple[float, ...], tau: tuple[float, float, float], vc_n: float, vc_e: float, p: VesselParams
+) -> tuple[float, float, float, float, float, float]:
+    """(eta_dot, nu_r_dot) for the first six state entries, a body force tau = (X [N], Y [N], N [N m]).
 
     Fossen (2021) ch. 6: eta_dot = R(psi) nu, M nu_r_dot = tau - C(nu_r) nu_r - D(nu_r) nu_r.
     """
-    _, _, psi, ur, vr, r, n1, n2 = x
+    psi, ur, vr, r = x[2], x[3], x[4], x[5]
     c = math.cos(psi)
     s = math.sin(psi)
     # nu = nu_r + nu_c, with nu_c = R(psi)^T V_c (irrotational current, no yaw component)
     u = ur + c * vc_n + s * vc_e
     v = vr - s * vc_n + c * vc_e
+    tx, ty, tn = tau
+    # M nu_r_dot = tau - C(nu_r) nu_r + (linear + quadratic damping terms, which are negative)
+    ur_dot = (tx + p.m22 * vr * r + (p.x_u + p.x_uu * abs(ur)) * ur) / p.m11
+    vr_dot = (ty - p.m11 * ur * r + (p.y_v + p.y_vv * abs(vr)) * vr) / p.m22
+    r_dot = (tn - (p.m22 - p.m11) * ur * vr + (p.n_r + p.n_rr * abs(r)) * r) / p.m33
+    return (c * u - s * v, s * u + c * v, r, ur_dot, vr_dot, r_dot)
+
+
+def state_derivative(
+    x: State, n_cmd_port: float, n_cmd_stbd: float, vc_n: float, vc_e: float, p: VesselParams
+) -> State:
+    """x_dot of the differential-thrust boat for propeller demands [rev/s] and the current [m/s].
+
+    tau = (T_port + T_stbd, 0, l (T_port - T_stbd)); n_i_dot = (n_cmd_i - n_i) / T_n.
+    """
+    n1, n2 = x[6], x[7]
     t1 = thrust(n1, p)
     t2 = thrust(n2, p)
-    # M nu_r_dot = tau - C(nu_r) nu_r + (linear + quadratic damping terms, which are negative)
-    ur_dot = (t1 + t2 + p.m22 * vr * r + (p.x_u + p.x_uu * abs(ur)) * ur) / p.m11
-    vr_dot = (-p.m11 * ur * r + (p.y_v + p.y_vv * abs(vr)) * vr) / p.m22
-    r_dot = (p.lever_m * (t1 - t2) - (p.m22 - p.m11) * ur * vr + (p.n_r + p.n_rr * abs(r)) * r) / p.m33
+    body = rigid_body_derivative(x, (t1 + t2, 0.0, p.lever_m * (t1 - t2)), vc_n, vc_e, p)
     return (
-        c * u - s * v,
-        s * u + c * v,
-        r,
-        ur_dot,
-        vr_dot,
-        r_dot,
+        *body,
         (n_cmd_port - n1) / p.motor_time_constant_s,
         (n_cmd_stbd - n2) / p.motor_time_constant_s,
     )

@@ -28,6 +28,11 @@ def run_sitl(*args: str, timeout: float = WALL_LIMIT_S) -> subprocess.CompletedP
         ("count: two\n", "count"),
         ("flow:\n  kinds: [tornado]\n", "flow.kinds[0]"),
         ("start_poses: [[1.0, 2.0]]\n", "start_poses[0]"),
+        ("vehicle: hovercraft\n", "vehicle"),
+        ("count: 2\nvehicles: [rudder]\n", "vehicles"),
+        ("autopilot:\n  params:\n    wp_speed_mps: -5\n", "wp_speed_mps"),
+        ("autopilot:\n  params:\n    cruise_speed_mps: .nan\n", "cruise_speed_mps"),
+        ("vessel:\n  rudder:\n    position_m: 0.2\n", "vessel.rudder.position_m"),
     ],
 )
 def test_bad_config_keys_fail_with_one_line_naming_the_key(tmp_path, yaml_text, key):
@@ -47,6 +52,22 @@ def test_flag_values_are_checked_too():
     assert result.returncode == 2 and "serial:/dev/ttyUSB0" in result.stderr
     result = run_sitl("--speedup", "-3")
     assert result.returncode == 2 and "--speedup" in result.stderr
+    result = run_sitl("--vehicle", "rudder,hovercraft", "--count", "2")
+    assert result.returncode == 2 and "vehicles[1]" in result.stderr and "hovercraft" in result.stderr
+
+
+def test_one_vehicle_kind_per_boat(tmp_path):
+    record = tmp_path / "truth.jsonl"
+    args = ("--mavlink", "udpin:127.0.0.1:0", "--speedup", "max", "--duration", "2", "--count", "3")
+    result = run_sitl(*args, "--vehicle", "rudder,vectored,diff_thrust", "--record", str(record))
+    assert result.returncode == 0, result.stderr
+    states = [r for r in map(json.loads, record.read_text().splitlines()) if r["kind"] == "state"]
+    kinds = {r["sysid"]: (r["vehicle"], len(r["thrust"]), len(r["command"])) for r in states}
+    assert kinds == {1: ("rudder", 1, 2), 2: ("vectored", 4, 4), 3: ("diff_thrust", 2, 2)}
+    result = run_sitl(*args[:-2], "--vehicle", "vectored", "--record", str(record))
+    assert result.returncode == 0, result.stderr
+    states = [r for r in map(json.loads, record.read_text().splitlines()) if r["kind"] == "state"]
+    assert {r["vehicle"] for r in states} == {"vectored"}
 
 
 def test_semantic_checks_name_the_key():
@@ -125,5 +146,5 @@ def test_koopguide_sitl_help_lists_the_contract_flags():
         check=False,
     )
     assert result.returncode == 0
-    for flag in ("--config", "--mavlink", "--speedup", "--flow", "--count"):
+    for flag in ("--config", "--mavlink", "--speedup", "--flow", "--count", "--vehicle"):
         assert flag in result.stdout

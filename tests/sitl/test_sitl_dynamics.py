@@ -11,8 +11,8 @@ from sitl_gcs import sim_config
 from sitl.boat import Boat
 from sitl.flow import Flow
 from sitl.integrate import rk4_step
+from sitl.vehicles import VehicleParams
 from sitl.vessel import (
-    VesselParams,
     propeller_command,
     state_derivative,
     steady_surge_speed,
@@ -26,10 +26,10 @@ DT = 0.01
 
 def make_boat(overrides=None, pose=(2.25, 1.5, 0.0)):
     cfg = sim_config({"world": {"walls": False}, **(overrides or {})})
-    params = VesselParams.from_config(cfg.vessel)
+    vehicle = VehicleParams.from_config(cfg.vessel, cfg.vehicle)
     flow = Flow(cfg.flow, np.random.default_rng(0))
-    boat = Boat(1, cfg, params, flow, Tank(cfg.world, 0.2), pose, np.random.default_rng(1))
-    return boat, flow, params
+    boat = Boat(1, cfg, vehicle, flow, Tank(cfg.world, 0.2), pose, np.random.default_rng(1))
+    return boat, flow, vehicle.hull
 
 
 def run(boat, flow, seconds, commands=None):

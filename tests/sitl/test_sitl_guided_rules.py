@@ -78,3 +78,41 @@ def test_unsupported_frames_and_empty_masks_are_rejected():
         target(3559, frame=Frame.GLOBAL_INT, vel=(0.3, 0.0))
     with pytest.raises(SetpointRejected, match="not supported"):
         target(0xFFF)
+
+
+def test_zero_velocity_means_north_at_speed_zero_not_the_current_heading():
+    t = target(3559, vel=(0.0, 0.0))  # the boat heads east (NAV.psi = 90 deg)
+    assert t.kind == TargetKind.HEADING_SPEED and t.speed_mps == 0.0
+    assert t.heading_rad == 0.0  # atan2(0, 0) = 0: north, as ArduPilot Rover computes it
+    body = target(3559, frame=Frame.BODY_NED, vel=(0.0, 0.0))  # in a body frame it is relative: ahead
+    assert body.heading_rad == pytest.approx(math.pi / 2)
+
+
+def test_velocity_and_yaw_reverses_when_vx_is_negative_and_keeps_the_heading_at_zero():
+    astern = target(2535, vel=(-0.2, 0.0), yaw=1.0)
+    assert astern.speed_mps == pytest.approx(-0.2) and astern.heading_rad == pytest.approx(1.0)
+    assert target(2535, vel=(-1.0, 0.0), yaw=1.0).speed_mps == -CAP  # capped both ways
+    hold = target(2535, vel=(0.0, 0.0), yaw=math.pi / 2)  # "speed 0, keep heading east"
+    assert hold.speed_mps == 0.0 and hold.heading_rad == pytest.approx(math.pi / 2)
+    assert target(3559, vel=(-0.2, 0.0)).speed_mps == pytest.approx(0.2)  # velocity only: always ahead
+
+
+@pytest.mark.parametrize(
+    ("mask", "kwargs"),
+    [
+        (3559, {"vel": (math.nan, 0.0)}),
+        (3559, {"vel": (0.1, math.inf)}),
+        (2535, {"vel": (0.1, 0.0), "yaw": math.nan}),
+        (1511, {"vel": (0.1, 0.0), "yaw_rate": -math.inf}),
+        (0b110111111000, {"pos": (math.nan, 0.0)}),
+        (0b110111111000, {"pos": (1e30, 0.0)}),
+    ],
+)
+def test_non_finite_or_far_fields_that_are_used_reject_the_setpoint(mask, kwargs):
+    with pytest.raises(SetpointRejected, match=r"not finite|beyond"):
+        target(mask, **kwargs)
+
+
+def test_non_finite_fields_the_mask_ignores_do_not_matter():
+    t = target(3559, pos=(math.nan, math.nan), vel=(0.3, 0.0), yaw=math.nan, yaw_rate=math.inf)
+    assert t.speed_mps == pytest.approx(0.3) and t.heading_rad == 0.0

@@ -215,7 +215,8 @@ def test_messages_for_another_system_are_ignored(gcs_and_sim):
 
 def test_loiter_holds_against_a_current_while_hold_drifts(gcs_and_sim):
     current = {"flow": {"kinds": ["uniform"], "uniform": {"speed_mps": 0.1, "direction_deg": 0.0}}}
-    gcs, _ = gcs_and_sim(current)
+    tight = {"autopilot": {"params": {"loiter_radius_m": 0.05}}}  # LOIT_RADIUS 5 cm (default 2 m)
+    gcs, _ = gcs_and_sim({**current, **tight})
     gcs.mav.request_data_stream_send(1, 1, mavlink.MAV_DATA_STREAM_POSITION, 10, 1)
     assert gcs.set_mode(LOITER).result == mavlink.MAV_RESULT_ACCEPTED
     assert gcs.arm().result == mavlink.MAV_RESULT_ACCEPTED
