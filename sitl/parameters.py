@@ -15,7 +15,7 @@ import struct
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from koopguide.config import ConfigError
+from koopguide.base.config import ConfigError
 
 if TYPE_CHECKING:
     from sitl.config import AutopilotParams

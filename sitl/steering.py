@@ -231,4 +231,5 @@ def _skid_mix(common: float, differential: float) -> tuple[float, float]:
     if saturation > 1.0:
         common /= saturation
         differential /= saturation
-    return common + differential, common - differential
+    # clipped as well: the scaled sum can round to 1 + 1 ulp
+    return min(1.0, max(-1.0, common + differential)), min(1.0, max(-1.0, common - differential))

@@ -16,8 +16,10 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from sitl_gcs import sim_config
 
+from koopguide.mavlink.endpoint import Endpoint
+from koopguide.mavlink.link import Link, LinkSettings
+from koopguide.mavlink.wire import new_decoder
 from sitl import inbound
-from sitl.mavlink_endpoint import Endpoint, Link, new_decoder
 from sitl.recorder import Recorder
 from sitl.runner import Simulation
 from sitl.telemetry import StreamSchedule, TelemetryWriter, default_intervals
@@ -73,7 +75,8 @@ def socketless_simulation() -> tuple[Simulation, inbound.Channel]:
     """A simulator armed in GUIDED whose one link has no socket (its messages go nowhere)."""
     cfg = sim_config({"autopilot": {"initial_mode": "GUIDED", "start_armed": True}})
     sim = Simulation(cfg, Recorder(None))
-    link = Link(Endpoint.parse("udpout:127.0.0.1:9"), (1,), sim._on_message)
+    settings = LinkSettings(Endpoint.parse("udpout:127.0.0.1:9"), sources=((1, mavlink.MAV_COMP_ID_AUTOPILOT1),))
+    link = Link(settings, sim._on_message)  # never opened: no socket
     sim.links.append(link)
     boat = sim.boat(1)
     writer = TelemetryWriter(boat, link.encoders[1], cfg.origin, 0.0)
