@@ -11,7 +11,8 @@ everything and drops unsigned or badly signed frames (counted in ``Link.stats``)
 from __future__ import annotations
 
 from koopguide.mavlink.endpoint import Endpoint
-from koopguide.mavlink.link import Link, LinkSettings, MessageHandler
+from koopguide.mavlink.link import Link, MessageHandler
+from koopguide.mavlink.link_settings import LinkSettings
 from koopguide.mavlink.signing import SigningKey
 from koopguide.mavlink.wire import mavlink
 

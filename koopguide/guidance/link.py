@@ -13,7 +13,8 @@ from typing import Any
 
 from koopguide.guidance.settings import MavlinkSettings
 from koopguide.mavlink.endpoint import Endpoint
-from koopguide.mavlink.link import Link, LinkSettings
+from koopguide.mavlink.link import Link
+from koopguide.mavlink.link_settings import LinkSettings
 from koopguide.mavlink.signing import SigningKey
 
 SERVICE_LINK_ID = 0  # the signing link id of what the service sends

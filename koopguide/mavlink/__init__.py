@@ -8,7 +8,7 @@
   the signing ``Encoder``.
 * :mod:`~koopguide.mavlink.signing` - the key file (``SigningKey``) and the signature/replay check.
 * :mod:`~koopguide.mavlink.intake` - per-source parsing and the link counters (``LinkStats``).
-* :mod:`~koopguide.mavlink.link` - ``Link`` / ``LinkSettings``: the asyncio owner of one connection, with
+* :mod:`~koopguide.mavlink.link` - ``Link`` (opened with ``link_settings.LinkSettings``): the asyncio owner of one connection, with
   source pinning and bounded peers; :mod:`~koopguide.mavlink.datagram` (its exclusive UDP socket) and
   :mod:`~koopguide.mavlink.serial_port` (a raw serial device).
 

@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 
 from koopguide.mavlink.endpoint import Endpoint
 from koopguide.mavlink.intake import Intake, LinkStats
-from koopguide.mavlink.link import Link, LinkSettings
+from koopguide.mavlink.link import Link
+from koopguide.mavlink.link_settings import LinkSettings
 from koopguide.mavlink.signing import SignatureCheck, SigningKey
 
 from .support import encoder, frame, local_position, vehicle_heartbeat

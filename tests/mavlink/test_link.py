@@ -14,7 +14,8 @@ from pymavlink import mavutil
 
 from koopguide.mavlink import rover
 from koopguide.mavlink.endpoint import Endpoint, EndpointError
-from koopguide.mavlink.link import Link, LinkSettings
+from koopguide.mavlink.link import Link
+from koopguide.mavlink.link_settings import LinkSettings
 from koopguide.mavlink.signing import SigningKey
 from koopguide.mavlink.wire import mavlink
 

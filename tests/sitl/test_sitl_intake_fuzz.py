@@ -17,7 +17,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from sitl_gcs import sim_config
 
 from koopguide.mavlink.endpoint import Endpoint
-from koopguide.mavlink.link import Link, LinkSettings
+from koopguide.mavlink.link import Link
+from koopguide.mavlink.link_settings import LinkSettings
 from koopguide.mavlink.wire import new_decoder
 from sitl import inbound
 from sitl.recorder import Recorder
