@@ -8,9 +8,9 @@
   the signing ``Encoder``.
 * :mod:`~koopguide.mavlink.signing` - the key file (``SigningKey``) and the signature/replay check.
 * :mod:`~koopguide.mavlink.intake` - per-source parsing and the link counters (``LinkStats``).
-* :mod:`~koopguide.mavlink.link` - ``Link`` (opened with ``link_settings.LinkSettings``): the asyncio owner of one connection, with
-  source pinning and bounded peers; :mod:`~koopguide.mavlink.datagram` (its exclusive UDP socket) and
-  :mod:`~koopguide.mavlink.serial_port` (a raw serial device).
+* :mod:`~koopguide.mavlink.link` - ``Link`` (opened with ``link_settings.LinkSettings``): the asyncio owner
+  of one connection, with source pinning and bounded peers; :mod:`~koopguide.mavlink.datagram` (its
+  exclusive UDP socket) and :mod:`~koopguide.mavlink.serial_port` (a raw serial device).
 
 This package imports nothing from the guidance service or the simulator. Details: docs/mavlink.md.
 """
