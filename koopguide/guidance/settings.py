@@ -113,9 +113,18 @@ class ArrivalSettings:
     facing_deg: float
     settle_radius_m: float
     settle_timeout_s: float
+    reacquire_radius_m: float  # arrived -> guiding again beyond this distance from the goal [m]
+    integral_gain_per_s2: float  # station keeping: integral of the position error [1/s^2]
+    integral_limit_mps: float  # anti-windup: the integral term's largest speed [m/s]
+    min_approach_mps: float  # no cap (approach, turn slowdown) slows the boat below this outside radius_m [m/s]
 
     def __post_init__(self) -> None:
         _positive(self, "arrival", "radius_m", "station_gain")
+        _finite(self, "arrival", "reacquire_radius_m", "integral_gain_per_s2", "integral_limit_mps", "min_approach_mps")
+        _check(self.reacquire_radius_m > self.radius_m, "arrival.reacquire_radius_m", self.reacquire_radius_m,
+               f"> radius_m ({self.radius_m})")
+        for name in ("integral_gain_per_s2", "integral_limit_mps", "min_approach_mps"):
+            _check(getattr(self, name) >= 0, f"arrival.{name}", getattr(self, name), ">= 0")
         _finite(self, "arrival", "capture_radius_m", "approach_radius_m", "facing_deg", "settle_radius_m",
                 "settle_timeout_s")
         _check(self.capture_radius_m >= 0, "arrival.capture_radius_m", self.capture_radius_m, ">= 0")
@@ -155,13 +164,38 @@ class FailsafeSettings:
     outside_domain: OutsideDomain
     geofence_ned: tuple[tuple[float, float], tuple[float, float]] | None  # ((N_min, N_max), (E_min, E_max)) [m]
     on_exit: ExitMode
+    zero_with_yaw: bool  # zero-velocity commands carry the current heading as yaw (mask 2535): no pivot north
+    stall_s: float  # guiding with less than stall_progress_m of progress along the field for this long [s]
+    stall_progress_m: float  # ... switches to direct pursuit of the goal (degraded) [m]
+    heartbeat_gap_s: float  # a vehicle heartbeat gap this long (wall) re-requests the telemetry streams [s]
 
     def __post_init__(self) -> None:
-        _positive(self, "failsafe", "stale_after_s")
+        _positive(self, "failsafe", "stale_after_s", "stall_s", "stall_progress_m", "heartbeat_gap_s")
         if self.geofence_ned is not None:
             for axis, (lo, hi) in zip("NE", self.geofence_ned, strict=True):
                 _check(math.isfinite(lo) and math.isfinite(hi) and lo < hi, "failsafe.geofence_ned", self.geofence_ned,
                        f"finite [min, max] with min < max on {axis}")
+
+
+@dataclass(frozen=True)
+class LimitSettings:
+    """Physical bounds on every input (issue 11): anything outside is rejected, counted and logged."""
+
+    max_speed_mps: float  # a reported, estimated or implied vehicle speed above this is not physical [m/s]
+    max_position_m: float  # |N| or |E| beyond this [m]
+    max_jump_m: float  # a fix this far (plus max_speed_mps x elapsed time) from the estimate is a teleport [m]
+    max_turn_rate_dps: float  # |yaw rate| above this [deg/s]
+    max_current_mps: float  # a current estimate above this is reset [m/s]
+    clock_window_s: float  # a stamp this far ahead of the vehicle clock (plus elapsed time) is rejected [s]
+    clock_confirm: int  # ... unless this many consecutive stamps agree: then the clock restarts (reboot/jump)
+    teleport_hold_s: float  # hold this long (vehicle time) after the last teleported fix [s]
+    teleport_confirm_s: float  # a jumped position that stays this long with no fix at the old place is taken [s]
+    log_every_s: float  # at most one rejection log line per kind this often (wall) [s]
+
+    def __post_init__(self) -> None:
+        _positive(self, "limits", "max_speed_mps", "max_position_m", "max_jump_m", "max_turn_rate_dps",
+                  "max_current_mps", "clock_window_s", "teleport_hold_s", "teleport_confirm_s", "log_every_s")
+        _check(1 <= self.clock_confirm <= 100, "limits.clock_confirm", self.clock_confirm, "1 .. 100")
 
 
 @dataclass(frozen=True)
@@ -184,11 +218,14 @@ class GuidanceConfig:
     arrival: ArrivalSettings
     estimator: EstimatorSettings
     failsafe: FailsafeSettings
+    limits: LimitSettings
     status: StatusSettings
 
     def __post_init__(self) -> None:
         _check(bool(VEHICLE_ID.match(self.vehicle_id)), "vehicle_id", self.vehicle_id,
                "1-64 characters of A-Z a-z 0-9 _ -")
+        _check(self.limits.max_speed_mps >= self.command.max_speed_mps, "limits.max_speed_mps",
+               self.limits.max_speed_mps, f">= command.max_speed_mps ({self.command.max_speed_mps})")
 
 
 def load(user_file: str | Path | None = None, overrides: dict[str, Any] | None = None) -> GuidanceConfig:

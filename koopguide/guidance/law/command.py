@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -57,11 +57,13 @@ CURRENT_MIN_MPS = 0.005  # a current estimate below this is no reason to slow th
 
 @dataclass(frozen=True)
 class Setpoint:
-    """One decision: the NED velocity to send [m/s], the resulting state and why (for hold/fault)."""
+    """One decision: the NED velocity to send [m/s], the resulting state and why (for hold/fault);
+    ``ground_ned``: the ground velocity the law wanted [m/s] (before crabbing and slowing), when guiding."""
 
     velocity_ned: np.ndarray
     state: GuidanceState
     reason: str | None = None
+    ground_ned: np.ndarray | None = None
 
     @property
     def yaw_rad(self) -> float | None:
@@ -96,6 +98,10 @@ class GuidanceLaw:
     def from_config(cls, field: FlowField, cfg: GuidanceConfig) -> GuidanceLaw:
         """The law for ``field`` placed and limited as ``cfg`` says."""
         return cls(field, ModelFrame.place(field.goal, cfg.frame), cfg.command, cfg.arrival, cfg.failsafe)
+
+    def place_goal(self, goal_ned: tuple[float, float]) -> None:
+        """Move the model's goal to ``goal_ned`` [m] (a geodetic goal, once placed in local NED)."""
+        self.frame = replace(self.frame, goal_ned=(float(goal_ned[0]), float(goal_ned[1])))
 
     @property
     def goal_ned(self) -> np.ndarray:
@@ -153,10 +159,13 @@ class GuidanceLaw:
         # boat circling it at the speed floor never turns tightly enough to get in: head for the goal,
         # turning on the spot when facing away.
         direction = to_goal if captured else direction / float(np.hypot(*direction))
-        speed = min(max(speed, self.command.min_speed_mps), self.command.max_speed_mps,  # over ground
-                    self.approach_cap(distance, direction, current_ned))
-        floor = CRAB_MIN_SPEED_MPS if captured else self.command.min_speed_mps
-        return Setpoint(self.steer(direction * speed, heading_rad, current_ned, floor), GuidanceState.GUIDING)
+        # The approach cap is a model of the boat (it turns to face the current while it still moves); it
+        # never slows the boat below min_approach_mps, or a boat unlike the model stalls short of the goal.
+        cap = max(self.approach_cap(distance, direction, current_ned), self.arrival.min_approach_mps)
+        speed = min(max(speed, self.command.min_speed_mps), self.command.max_speed_mps, cap)  # over ground
+        floor = min(self.arrival.min_approach_mps, speed) if captured else self.command.min_speed_mps
+        wanted = direction * speed
+        return Setpoint(self.steer(wanted, heading_rad, current_ned, floor), GuidanceState.GUIDING, ground_ned=wanted)
 
     def approach_cap(self, distance: float, direction: np.ndarray, current_ned: np.ndarray | None) -> float:
         """The largest ground speed [m/s] along ``direction`` that keeps the boat facing into the current.
