@@ -296,6 +296,11 @@ class Supervisor:
         )
         return True
 
+    def reacquire_if_drifted(self, distance: float, now: float) -> None:
+        """Leave arrived for guiding if ``distance`` [m] from the goal is beyond reacquire_radius_m."""
+        if self.arrived:
+            self._check_reacquire(distance, now)
+
     def _check_reacquire(self, distance: float, now: float) -> None:
         limit = self.cfg.arrival.reacquire_radius_m
         if distance <= limit:
