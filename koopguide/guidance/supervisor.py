@@ -236,7 +236,8 @@ class Supervisor:
             self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s")
         error = law.goal_ned - p
         if self.arrived:
-            v = law.steer(self.station.update(now, error), heading, current, CRAB_MIN_SPEED_MPS)
+            wanted = self.station.update(now, error, law.station_velocity(p, current))  # P (capped) + I
+            v = law.steer(wanted, heading, current, CRAB_MIN_SPEED_MPS)
             keep_station = cfg.arrival.on_arrival is ArrivalAction.STATION_KEEP
             if not keep_station and self._settle(distance, heading, current, now):
                 return self._handed_over(now, wall, requests)
@@ -256,7 +257,7 @@ class Supervisor:
             if 1e-12 < speed < floor:
                 wanted = wanted * (floor / speed)
             v = law.steer(wanted, heading, current, floor)
-            stalled = self.progress.update(now, p, wanted)
+            stalled = self.progress.update(now, p, wanted, distance)
             why = " (no progress in direct pursuit either)" if stalled else ""
             return self._out(
                 tuple(v),
@@ -268,7 +269,7 @@ class Supervisor:
                 requests,
             )
         sp = law.decide(p, False, heading, current)
-        if sp.state is S.GUIDING and self.progress.update(now, p, sp.ground_ned):
+        if sp.state is S.GUIDING and self.progress.update(now, p, sp.ground_ned, distance):
             self.degraded = True
             self.station.reset()
             self.progress.reset()

@@ -6,13 +6,13 @@ The distance made good along the wanted track is the odometer
 
 with ``d`` the unit direction the guidance wanted over ground at the previous fix (the field's streamline,
 or the straight line to the goal in direct pursuit). Following the field, s grows at the boat's speed; a
-boat that stalls, circles or is held off by a current makes none. Stalled: less than ``stall_progress_m``
-of s over the last ``stall_s``. Conventions: positions ``(2,)`` NED [m], vehicle seconds.
+boat that stalls, circles or is held off by a current makes none. A boat that overshoots a turn of the
+field loses some s while it comes back (yet gets closer to the goal), so progress is measured from the
+best so far of both s and the straight-line distance to the goal: stalled when neither has improved by
+``stall_progress_m`` for ``stall_s``. Conventions: NED [m], vehicle seconds.
 """
 
 from __future__ import annotations
-
-import collections
 
 import numpy as np
 
@@ -22,30 +22,29 @@ class ProgressWatchdog:
         self.stall_s = stall_s
         self.stall_progress_m = stall_progress_m
         self.odometer = 0.0  # distance made good along the wanted directions [m]
-        self._since: float | None = None  # vehicle time the watch (re)started [s]
+        self._mark: tuple[float, float, float] | None = None  # (t, odometer, -distance) at the last progress
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # (position, unit direction) of the last update
-        self._history: collections.deque[tuple[float, float]] = collections.deque()  # (t, odometer)
 
     def reset(self) -> None:
         self.odometer = 0.0
-        self._since = None
+        self._mark = None
         self._last = None
-        self._history.clear()
 
-    def update(self, t: float, p_ned: np.ndarray, wanted_ned: np.ndarray | None) -> bool:
-        """Fold in position ``p_ned`` at ``t`` and the wanted ground velocity there; True when stalled."""
+    def update(self, t: float, p_ned: np.ndarray, wanted_ned: np.ndarray | None, distance_m: float) -> bool:
+        """Fold in position ``p_ned`` at ``t``, the wanted ground velocity there and the distance to the goal;
+        True when stalled."""
         p = np.asarray(p_ned, dtype=float)
-        if self._since is None:
-            self._since = t
         if self._last is not None:
             self.odometer += float((p - self._last[0]) @ self._last[1])
         norm = float(np.hypot(*wanted_ned)) if wanted_ned is not None else 0.0
         direction = np.asarray(wanted_ned, dtype=float) / norm if norm > 1e-12 else np.zeros(2)
         self._last = (p, direction)
-        history = self._history
-        history.append((t, self.odometer))
-        while len(history) > 1 and history[1][0] <= t - self.stall_s:  # keep one sample at or before the window
-            history.popleft()
-        if t - self._since < self.stall_s or history[0][0] > t - self.stall_s:
-            return False
-        return self.odometer - history[0][1] < self.stall_progress_m
+        mark, step = self._mark, self.stall_progress_m
+        if mark is None or self.odometer >= mark[1] + step or -distance_m >= mark[2] + step:
+            best = (
+                (self.odometer, -distance_m)
+                if mark is None
+                else (max(self.odometer, mark[1]), max(-distance_m, mark[2]))
+            )
+            self._mark = (t, *best)
+        return t - self._mark[0] >= self.stall_s

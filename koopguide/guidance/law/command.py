@@ -79,8 +79,14 @@ def hold(reason: str) -> Setpoint:
 class GuidanceLaw:
     """Field + frame + limits. ``decide`` maps an estimated NED position to a :class:`Setpoint`."""
 
-    def __init__(self, field: FlowField, frame: ModelFrame, command: CommandSettings, arrival: ArrivalSettings,
-                 failsafe: FailsafeSettings) -> None:
+    def __init__(
+        self,
+        field: FlowField,
+        frame: ModelFrame,
+        command: CommandSettings,
+        arrival: ArrivalSettings,
+        failsafe: FailsafeSettings,
+    ) -> None:
         if field.dim != 2:
             raise ValueError(f"the guidance service steers in the plane: the model has dim {field.dim}, expected 2")
         self.field = field
@@ -115,8 +121,9 @@ class GuidanceLaw:
         x = np.clip(self.frame.to_model(p_ned), self.domain_lo, self.domain_hi)
         return self.gain * self.frame.direction_to_ned(self.field.velocity(x))
 
-    def decide(self, p_ned: np.ndarray, arrived: bool, heading_rad: float | None = None,
-               current_ned: np.ndarray | None = None) -> Setpoint:
+    def decide(
+        self, p_ned: np.ndarray, arrived: bool, heading_rad: float | None = None, current_ned: np.ndarray | None = None
+    ) -> Setpoint:
         """The setpoint at estimated position ``p_ned``; ``arrived`` is sticky once reached.
 
         ``heading_rad`` (the vehicle's heading from north, when known) slows the command while the boat
@@ -135,9 +142,7 @@ class GuidanceLaw:
         distance = self.distance_to_goal(p_ned)
         to_goal = (self.goal_ned - p_ned) / distance if distance > 1e-9 else ZERO
         if arrived or distance <= self.arrival.radius_m:  # keep station at the goal
-            speed = min(self.arrival.station_gain * distance, self.command.max_speed_mps,
-                        self.approach_cap(distance, to_goal, current_ned))
-            v = self.steer(to_goal * speed, heading_rad, current_ned, CRAB_MIN_SPEED_MPS)
+            v = self.steer(self.station_velocity(p_ned, current_ned), heading_rad, current_ned, CRAB_MIN_SPEED_MPS)
             return Setpoint(v, GuidanceState.ARRIVED)
         x = self.frame.to_model(p_ned)
         x0 = np.clip(x, self.domain_lo, self.domain_hi)
@@ -167,6 +172,22 @@ class GuidanceLaw:
         wanted = direction * speed
         return Setpoint(self.steer(wanted, heading_rad, current_ned, floor), GuidanceState.GUIDING, ground_ned=wanted)
 
+    def station_velocity(self, p_ned: np.ndarray, current_ned: np.ndarray | None) -> np.ndarray:
+        """Keeping station: the ground velocity [m/s] toward the goal, ``station_gain`` per metre from it, no
+        faster than keeps the boat facing into the current (:meth:`approach_cap`) - the proportional term;
+        the supervisor's :class:`~koopguide.guidance.law.station.StationKeeper` adds the integral."""
+        offset = self.goal_ned - np.asarray(p_ned, dtype=float)
+        distance = float(np.hypot(*offset))
+        if distance <= 1e-9:
+            return ZERO.copy()
+        to_goal = offset / distance
+        speed = min(
+            self.arrival.station_gain * distance,
+            self.command.max_speed_mps,
+            self.approach_cap(distance, to_goal, current_ned),
+        )
+        return to_goal * speed
+
     def approach_cap(self, distance: float, direction: np.ndarray, current_ned: np.ndarray | None) -> float:
         """The largest ground speed [m/s] along ``direction`` that keeps the boat facing into the current.
 
@@ -193,8 +214,9 @@ class GuidanceLaw:
             return math.inf
         return c_norm * math.sin(theta) / math.sin(theta + alpha)
 
-    def steer(self, v_ground: np.ndarray, heading_rad: float | None, current_ned: np.ndarray | None,
-              floor_mps: float) -> np.ndarray:
+    def steer(
+        self, v_ground: np.ndarray, heading_rad: float | None, current_ned: np.ndarray | None, floor_mps: float
+    ) -> np.ndarray:
         """The setpoint that moves the boat over ground at ``v_ground``: crabbed into the estimated current
         (``current_compensation``), then slowed by cos(heading error) while the boat turns onto it
         (``turn_slowdown``), but not below ``floor_mps`` (nor above the unslowed speed)."""
@@ -286,8 +308,12 @@ def crab(v_ground: np.ndarray, current_ned: np.ndarray, glide_limit_rad: float =
     # ... but no further than glide_limit_rad off upstream: a boat turned across the current is swept off
     off = math.atan2(upstream[0] * h[1] - upstream[1] * h[0], float(upstream @ h))
     off = min(max(off, -glide_limit_rad), glide_limit_rad)
-    h = np.array([upstream[0] * math.cos(off) - upstream[1] * math.sin(off),
-                  upstream[0] * math.sin(off) + upstream[1] * math.cos(off)])
+    h = np.array(
+        [
+            upstream[0] * math.cos(off) - upstream[1] * math.sin(off),
+            upstream[0] * math.sin(off) + upstream[1] * math.cos(off),
+        ]
+    )
     return h * CRAB_MIN_SPEED_MPS
 
 

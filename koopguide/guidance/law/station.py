@@ -39,8 +39,9 @@ class StationKeeper:
         self.integral = np.zeros(2)
         self.t = None
 
-    def update(self, t: float, error_ned: np.ndarray) -> np.ndarray:
-        """The wanted ground velocity at vehicle time ``t`` for position error ``error_ned`` = goal - p."""
+    def update(self, t: float, error_ned: np.ndarray, proportional_ned: np.ndarray | None = None) -> np.ndarray:
+        """The wanted ground velocity at vehicle time ``t`` for position error ``error_ned`` = goal - p;
+        ``proportional_ned`` replaces the term kp e (e.g. one capped by a model of the boat) [m/s]."""
         e = np.asarray(error_ned, dtype=float)
         if not np.all(np.isfinite(e)):
             self.reset()
@@ -48,7 +49,7 @@ class StationKeeper:
         dt = 0.0 if self.t is None or t <= self.t else min(t - self.t, MAX_STEP_S)
         if self.t is None or t > self.t:
             self.t = t
-        proportional = self.kp * e
+        proportional = self.kp * e if proportional_ned is None else np.asarray(proportional_ned, dtype=float)
         out = proportional + self.integral
         saturated = float(np.hypot(*out)) >= self.max_speed
         if dt > 0.0 and not (saturated and float(e @ out) > 0.0):  # conditional integration
