@@ -57,6 +57,7 @@ class Supervisor:
         # the state machine
         self.state, self.reason, self.degraded = S.IDLE, "not started", False
         self.arrived = False  # within the arrival radius and not since drifted beyond the reacquire radius
+        self.back_reason = ""  # why guiding again after an arrival (until the next one)
         self.arrived_t: float | None = None  # vehicle time of the first arrival [s]
         self.settled = False  # handed over to LOITER/HOLD after arrival
         self.reclaim = False  # drifted off after the hand-over: take GUIDED back
@@ -230,7 +231,7 @@ class Supervisor:
         if self.arrived:
             self._check_reacquire(distance, now)
         elif distance <= cfg.arrival.radius_m:
-            self.arrived, self.degraded = True, False
+            self.arrived, self.degraded, self.back_reason = True, False, ""
             self.station.reset()
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
             self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s")
@@ -279,7 +280,7 @@ class Supervisor:
                 f"({distance:.2f} m from the goal): switching to direct pursuit",
             )
             return self._guide(now, wall, requests)
-        reason = sp.reason or f"following the field, {distance:.2f} m from the goal"
+        reason = sp.reason or f"{self.back_reason}following the field, {distance:.2f} m from the goal"
         return self._out(tuple(sp.velocity_ned), sp.state, reason, True, now, requests)
 
     def _settle(self, distance: float, heading: float | None, current: np.ndarray | None, now: float) -> bool:
@@ -307,6 +308,7 @@ class Supervisor:
         if distance <= limit:
             return
         reason = f"drifted {distance:.2f} m from the goal, beyond reacquire_radius_m {limit:g}: guiding back"
+        self.back_reason = reason.replace(": guiding back", "; ")
         self._note(logging.WARNING, reason)
         self.arrived, self.reclaim = False, self.settled
         self.settled = self.degraded = False
