@@ -48,6 +48,7 @@ class Supervisor:
             cfg.arrival.integral_gain_per_s2,
             cfg.arrival.integral_limit_mps,
             cfg.command.max_speed_mps,
+            deadband_m=cfg.arrival.radius_m,
         )
         self.progress = ProgressWatchdog(cfg.failsafe.stall_s, cfg.failsafe.stall_progress_m)
         # the vehicle's heartbeat (service clock)
@@ -232,7 +233,6 @@ class Supervisor:
             self._check_reacquire(distance, now)
         elif distance <= cfg.arrival.radius_m:
             self.arrived, self.degraded, self.back_reason = True, False, ""
-            self.station.reset()
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
             self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s")
         error = law.goal_ned - p
@@ -272,7 +272,6 @@ class Supervisor:
         sp = law.decide(p, False, heading, current)
         if sp.state is S.GUIDING and self.progress.update(now, p, sp.ground_ned, distance):
             self.degraded = True
-            self.station.reset()
             self.progress.reset()
             self._note(
                 logging.WARNING,
@@ -312,8 +311,7 @@ class Supervisor:
         self._note(logging.WARNING, reason)
         self.arrived, self.reclaim = False, self.settled
         self.settled = self.degraded = False
-        self.station.reset()
-        self.progress.reset()
+        self.progress.reset()  # the station keeper's integral stays: a bias of the boat or the current
         self._set_state(S.GUIDING, reason, now)
 
     def _restart_estimates(self, forget_fixes: bool = False) -> None:

@@ -2,7 +2,7 @@
 
 The wanted ground velocity toward the goal is
 
-    v = kp e + ki integral(e dt),   e = goal - p   (NED [m]; v [m/s])
+    v = kp e + ki integral(e_x dt),   e = goal - p,   e_x = e (1 - d0 / |e|)+   (NED [m]; v [m/s])
 
 (a PI controller on a vehicle that is, to first order, an integrator of its velocity setpoint:
 s^2 + kp s + ki = 0, damping kp / (2 sqrt(ki)); Astrom & Murray (2021), "Feedback Systems",
@@ -12,6 +12,9 @@ compensation assumes (a boat whose speed through the water, not over ground, fol
 by the current under P alone; the integral grows until it cancels the drift). Anti-windup (same
 chapter, "integrator windup"): the integral term is clamped to ``integral_limit_mps``, and it does not integrate
 while the output saturates at ``max_speed_mps`` in the direction of the error (conditional integration).
+Only the error beyond the dead band ``d0`` (the arrival radius) is integrated, and the integral is kept
+(a bias of the boat or the current, learnt once): where the model-based feed-forward already holds the
+boat inside the arrival radius, the integral stays out of its way.
 
 Conventions: positions ``(2,)`` local NED [m], velocities ``(2,)`` NED [m/s], times in vehicle seconds.
 """
@@ -26,8 +29,16 @@ MAX_STEP_S = 0.5  # a longer gap between updates integrates only this long (a st
 class StationKeeper:
     """PI feedback toward a goal; :meth:`update` gives the wanted ground velocity [m/s]."""
 
-    def __init__(self, kp_per_s: float, ki_per_s2: float, integral_limit_mps: float, max_speed_mps: float) -> None:
+    def __init__(
+        self,
+        kp_per_s: float,
+        ki_per_s2: float,
+        integral_limit_mps: float,
+        max_speed_mps: float,
+        deadband_m: float = 0.0,
+    ) -> None:
         self.kp = kp_per_s
+        self.deadband = deadband_m
         self.ki = ki_per_s2
         self.integral_limit = integral_limit_mps
         self.max_speed = max_speed_mps
@@ -53,7 +64,9 @@ class StationKeeper:
         out = proportional + self.integral
         saturated = float(np.hypot(*out)) >= self.max_speed
         if dt > 0.0 and not (saturated and float(e @ out) > 0.0):  # conditional integration
-            integral = self.integral + self.ki * e * dt
+            norm_e = float(np.hypot(*e))
+            excess = e * max(0.0, 1.0 - self.deadband / norm_e) if norm_e > 0.0 else e
+            integral = self.integral + self.ki * excess * dt
             norm = float(np.hypot(*integral))
             self.integral = integral * (self.integral_limit / norm) if norm > self.integral_limit else integral
             out = proportional + self.integral
