@@ -26,11 +26,10 @@ from koopguide.guidance import vehicle as rover
 from koopguide.guidance.estimation.progress import ProgressWatchdog
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceLaw, GuidanceState, along_current
 from koopguide.guidance.law.station import StationKeeper
+from koopguide.guidance.requests import RequestSchedule
 from koopguide.guidance.settings import ArrivalAction, GuidanceConfig
 from koopguide.guidance.vehicle_state import VehicleState
 
-ATTITUDE_RATE_HZ = 10.0  # requested ATTITUDE rate (turn slowdown, current estimate) at most
-FRESH_STREAM_S = 2.0  # positions younger than this: the streams are flowing, no need to ask again
 OUTPUT_GAP_PERIODS = 2.0  # no setpoint for this many command periods while guiding/arrived: fault
 ZERO = (0.0, 0.0)
 S = GuidanceState
@@ -67,8 +66,7 @@ class Supervisor:
         self.last_sent_t: float | None = None  # vehicle time of the last setpoint that went out
         self.output_fault = False
         self.link_was_up = False
-        self.streams_due, self.streams_wall = True, -math.inf
-        self.last_request: dict[str, float] = {}  # what -> wall time last asked
+        self.schedule = RequestSchedule(cfg)  # mode, arm and telemetry requests, and their retries
         self.transitions: list[tuple[float, str]] = []  # (vehicle time, state) on each change
         self.restarts = 0  # vehicle clock restarts seen (reboots and jumps)
         self._notes: list[ev.Note] = []
@@ -97,7 +95,7 @@ class Supervisor:
         first = not self.link_up(hb.wall_s)
         gap = None if self.heartbeat_wall is None else hb.wall_s - self.heartbeat_wall
         if first or (gap is not None and gap > self.cfg.failsafe.heartbeat_gap_s):
-            self.streams_due = True  # (re)request telemetry: the vehicle may have rebooted
+            self.schedule.streams_due = True  # (re)request telemetry: the vehicle may have rebooted
             if not first:
                 self._note(logging.WARNING, f"vehicle heartbeat gap of {gap:.1f} s; requesting telemetry again")
         self.heartbeat_wall, self.mode, self.armed = hb.wall_s, hb.mode, hb.armed
@@ -124,8 +122,7 @@ class Supervisor:
         return True
 
     def update_current(self, t: float) -> None:
-        """After the command (the current changes over tens of seconds): fold the fix at ``t`` into the
-        current estimate."""
+        """After the command (the current changes over tens of seconds): the fix at ``t`` into the current."""
         self.vehicle.update_current(t)
 
     def on_clock_restart(self, restart: ev.ClockRestart) -> None:
@@ -138,7 +135,7 @@ class Supervisor:
         self.restarts += 1
         self._restart_estimates(forget_fixes=True)
         self.last_sent_t, self.output_fault = None, False
-        self.streams_due = True
+        self.schedule.streams_due = True
         if restart.rebooted:
             self.engaged = False  # a rebooted vehicle's mode is not the pilot's choice: take GUIDED again
 
@@ -182,7 +179,7 @@ class Supervisor:
                     f"vehicle heartbeat lost for {cfg.mavlink.link_timeout_s:.1f} s; waiting for the link",
                 )
             return self._out(ZERO, S.WAITING, "no vehicle heartbeat", send=False, t=now)
-        requests = self._stream_requests(now, wall)
+        requests = self.schedule.streams(self.position_age(now), wall)
         age = self.position_age(now)
         if age is None:
             return self._out(ZERO, S.WAITING, "waiting for LOCAL_POSITION_NED", in_guided, now, requests)
@@ -206,11 +203,11 @@ class Supervisor:
                     now,
                     requests,
                 )
-            requests += self._request("mode", ev.SetMode(rover.GUIDED), wall)
+            requests += self.schedule.once_per_retry("mode", ev.SetMode(rover.GUIDED), wall)
             return self._out(ZERO, S.WAITING, "switching the vehicle to GUIDED", False, now, requests)
         if not self.armed:
             if cfg.arm:
-                requests += self._request("arm", ev.Arm(), wall)
+                requests += self.schedule.once_per_retry("arm", ev.Arm(), wall)
                 return self._out(ZERO, S.WAITING, "arming", True, now, requests)
             return self._out(ZERO, S.WAITING, "vehicle disarmed (arm it, or run with --arm)", True, now, requests)
         return self._guide(now, wall, requests)
@@ -219,7 +216,7 @@ class Supervisor:
         keep = rover.LOITER if self.cfg.arrival.on_arrival is ArrivalAction.LOITER else rover.HOLD
         in_guided = self.mode == rover.GUIDED
         if self.mode != keep and in_guided:
-            requests += self._request("mode", ev.SetMode(keep), wall)
+            requests += self.schedule.once_per_retry("mode", ev.SetMode(keep), wall)
         return self._out(ZERO, S.ARRIVED, f"arrived; {rover.mode_name(keep)} holds the boat", in_guided, now, requests)
 
     def _guide(self, now: float, wall: float, requests: list[ev.Request]) -> ev.Decision:
@@ -236,9 +233,17 @@ class Supervisor:
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
             self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s")
         error = law.goal_ned - p
-        if self.arrived:
+        # After a drift-off, within the capture radius: back onto the goal with the station keeping control
+        # (honestly reported as guiding), not the approach's speed floor that would overshoot the goal.
+        drifted_near = bool(self.back_reason) and distance <= cfg.arrival.capture_radius_m and not self.degraded
+        if self.arrived or drifted_near:
             wanted = self.station.update(now, error, law.station_velocity(p, current))  # P (capped) + I
             v = law.steer(wanted, heading, current, CRAB_MIN_SPEED_MPS)
+            if drifted_near:
+                if self.progress.update(now, p, wanted, distance):
+                    return self._start_pursuit(now, wall, distance, requests)
+                reason = f"{self.back_reason}keeping station onto the goal, {distance:.2f} m away"
+                return self._out(tuple(v), S.GUIDING, reason, True, now, requests)
             keep_station = cfg.arrival.on_arrival is ArrivalAction.STATION_KEEP
             if not keep_station and self._settle(distance, heading, current, now):
                 return self._handed_over(now, wall, requests)
@@ -271,16 +276,16 @@ class Supervisor:
             )
         sp = law.decide(p, False, heading, current)
         if sp.state is S.GUIDING and self.progress.update(now, p, sp.ground_ned, distance):
-            self.degraded = True
-            self.progress.reset()
-            self._note(
-                logging.WARNING,
-                f"no progress along the field for {cfg.failsafe.stall_s:g} s "
-                f"({distance:.2f} m from the goal): switching to direct pursuit",
-            )
-            return self._guide(now, wall, requests)
+            return self._start_pursuit(now, wall, distance, requests)
         reason = sp.reason or f"{self.back_reason}following the field, {distance:.2f} m from the goal"
         return self._out(tuple(sp.velocity_ned), sp.state, reason, True, now, requests)
+
+    def _start_pursuit(self, now: float, wall: float, distance: float, requests: list[ev.Request]) -> ev.Decision:
+        self.degraded = True
+        self.progress.reset()
+        why = f"no progress along the field for {self.cfg.failsafe.stall_s:g} s, {distance:.2f} m from the goal"
+        self._note(logging.WARNING, f"{why}: switching to direct pursuit")
+        return self._guide(now, wall, requests)
 
     def _settle(self, distance: float, heading: float | None, current: np.ndarray | None, now: float) -> bool:
         """loiter/hold on arrival: steer on onto the goal, facing along the current, then hand over (LOITER holds
@@ -353,29 +358,6 @@ class Supervisor:
             self._note(level, f"state {state.value}: {reason}")
             self.transitions.append((t, state.value))
         self.state, self.reason = state, reason
-
-    def _request(self, what: str, request: ev.Request, wall: float) -> list[ev.Request]:
-        """Ask now, or again after ``command_retry_s`` until its effect is seen."""
-        if wall - self.last_request.get(what, -math.inf) < self.cfg.mavlink.command_retry_s:
-            return []
-        self.last_request[what] = wall
-        return [request]
-
-    def _stream_requests(self, now: float, wall: float) -> list[ev.Request]:
-        """The telemetry rates: on (re)connect, after a reboot or heartbeat gap, and again while no fix comes."""
-        age = self.position_age(now)
-        fresh = age is not None and age < FRESH_STREAM_S
-        if not self.streams_due and (fresh or wall - self.streams_wall < 2 * self.cfg.mavlink.command_retry_s):
-            return []
-        self.streams_due, self.streams_wall = False, wall
-        cfg = self.cfg
-        rate = cfg.mavlink.position_rate_hz
-        out: list[ev.Request] = [ev.MessageInterval(rover.MSG_LOCAL_POSITION_NED, rate)]
-        # the heading: turn slowdown, current estimate, and the yaw of zero-velocity commands
-        out.append(ev.MessageInterval(rover.MSG_ATTITUDE, min(rate, ATTITUDE_RATE_HZ)))
-        if cfg.frame.goal_latlon is not None:
-            out.append(ev.MessageInterval(rover.MSG_GLOBAL_POSITION_INT, rate))
-        return out
 
     def _place_geodetic_goal(self) -> None:
         goal = self.cfg.frame.goal_latlon

@@ -89,7 +89,9 @@ class VehicleState:
         if not self.tracker.update(t, fix_vector).accepted:
             return False
         p_est, v_est = self.tracker.predict(t)
-        if not (np.all(np.isfinite(p_est)) and float(np.hypot(*v_est)) <= self.cfg.limits.max_speed_mps):
+        lim = self.cfg.limits
+        inside = np.all(np.abs(p_est) <= lim.max_position_m) and float(np.hypot(*v_est)) <= lim.max_speed_mps
+        if not inside:  # also False for NaN
             self.notes.append(
                 Note(
                     logging.WARNING,
