@@ -13,17 +13,21 @@ by the current under P alone; the integral grows until it cancels the drift). An
 chapter, "integrator windup"): the integral term is clamped to ``integral_limit_mps``, and it does not integrate
 while the output saturates at ``max_speed_mps`` in the direction of the error (conditional integration).
 Only the error beyond the dead band ``d0`` (the arrival radius) is integrated, and the integral is kept
-(a bias of the boat or the current, learnt once): where the model-based feed-forward already holds the
-boat inside the arrival radius, the integral stays out of its way.
+across drift-offs (a bias of the boat or the current); inside the dead band it leaks away slowly
+(``LEAK_S``), so that a transient (a gust, a stale position) leaves no lasting push: where the model-based
+feed-forward already holds the boat inside the arrival radius, the integral stays out of its way.
 
 Conventions: positions ``(2,)`` local NED [m], velocities ``(2,)`` NED [m/s], times in vehicle seconds.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 MAX_STEP_S = 0.5  # a longer gap between updates integrates only this long (a stale or restarted estimate)
+LEAK_S = 30.0  # inside the dead band the integral decays with this time constant [s]
 
 
 class StationKeeper:
@@ -65,8 +69,10 @@ class StationKeeper:
         saturated = float(np.hypot(*out)) >= self.max_speed
         if dt > 0.0 and not (saturated and float(e @ out) > 0.0):  # conditional integration
             norm_e = float(np.hypot(*e))
-            excess = e * max(0.0, 1.0 - self.deadband / norm_e) if norm_e > 0.0 else e
-            integral = self.integral + self.ki * excess * dt
+            if norm_e <= self.deadband:
+                integral = self.integral * math.exp(-dt / LEAK_S)
+            else:
+                integral = self.integral + self.ki * e * (1.0 - self.deadband / norm_e) * dt
             norm = float(np.hypot(*integral))
             self.integral = integral * (self.integral_limit / norm) if norm > self.integral_limit else integral
             out = proportional + self.integral
