@@ -228,3 +228,44 @@ def test_a_stalled_vehicle_triggers_the_progress_watchdog(zshape_model: Path) ->
             assert not daemon.status()["degraded"]
 
     asyncio.run(scenario())
+
+
+@pytest.mark.timeout(120)
+def test_the_simulator_restarted_on_the_same_port_is_guided_again_within_seconds(zshape_model: Path) -> None:
+    """Issue 11's row: before, no setpoints until the new vehicle clock passed the old one, and then
+    hold/guiding flipped every second because the streams were never requested again."""
+    from sitl import config as sitl_config
+    from sitl.runner import SimulationThread
+
+    port = free_udp_port()
+    sim_cfg = sitl_config.load(
+        overrides={
+            "speedup": 5.0,
+            "start_poses": [[1.5, -1.5, 90.0]],
+            "world": {"walls": False},
+            "mavlink": {"endpoints": [f"udpout:127.0.0.1:{port}"]},
+        }
+    )
+
+    async def scenario() -> None:
+        daemon = await GuidanceDaemon.create(config(port, mavlink={"endpoint": f"udp:127.0.0.1:{port}"}), zshape_model)
+        task = asyncio.create_task(daemon.run())
+        try:
+            with SimulationThread(sim_cfg):
+                await until(lambda: daemon.state.value == "guiding", 20.0)
+                await asyncio.sleep(4.0)  # 20 s of vehicle time: the restarted clock starts far behind it
+                sent_before = daemon.setpoints_sent
+            with SimulationThread(sim_cfg):  # the same vehicle, rebooted: clock from 0, MANUAL, disarmed
+                t_restart = time.monotonic()
+                await until(lambda: daemon.supervisor.restarts == 1, 5.0)
+                await until(lambda: daemon.state.value == "guiding" and daemon.setpoints_sent > sent_before, 10.0)
+                assert time.monotonic() - t_restart < 10.0
+                first = len(daemon.transitions)
+                await asyncio.sleep(3.0)  # 15 s of vehicle time: steady guidance, no hold/guiding flip-flop
+                assert [s for _, s in daemon.transitions[first:]] == []
+                assert daemon.state.value == "guiding" and daemon.position_age() < 0.5
+        finally:
+            daemon.stop()
+            await task
+
+    asyncio.run(scenario())
