@@ -168,7 +168,9 @@ class GuidanceLaw:
         # never slows the boat below min_approach_mps, or a boat unlike the model stalls short of the goal.
         cap = max(self.approach_cap(distance, direction, current_ned), self.arrival.min_approach_mps)
         speed = min(max(speed, self.command.min_speed_mps), self.command.max_speed_mps, cap)  # over ground
-        floor = min(self.arrival.min_approach_mps, speed) if captured else self.command.min_speed_mps
+        # Captured and facing away, a skid-steer boat turns on the spot (the turn slowdown's floor); a boat
+        # that cannot (a rudder boat) makes no progress, and the progress watchdog switches to pursuit.
+        floor = CRAB_MIN_SPEED_MPS if captured else self.command.min_speed_mps
         wanted = direction * speed
         return Setpoint(self.steer(wanted, heading_rad, current_ned, floor), GuidanceState.GUIDING, ground_ned=wanted)
 
