@@ -73,6 +73,10 @@ class SimulatorProcess:
     ) -> None:
         self.close()
 
+    def poll(self) -> int | None:
+        """The simulator's exit code if it has exited, else None (also None before it started)."""
+        return self._proc.poll() if self._proc is not None else None
+
     def close(self) -> None:
         """SIGTERM, wait for the clean exit (kill after 10 s), keep its last output."""
         proc = self._proc

@@ -101,12 +101,18 @@ class ArrivalSettings:
     facing_deg: Annotated[float, Range(0.0, 90.0, lo_open=True, hi_open=True)]
     settle_radius_m: Distance
     settle_timeout_s: Annotated[float, Range(0.0, 3600.0)]
+    reacquire_radius_m: Distance  # arrived -> guiding again beyond this distance from the goal [m]
+    integral_gain_per_s2: Annotated[float, Range(0.0, 100.0)]  # station keeping: integral of the error [1/s^2]
+    integral_limit_mps: Speed  # anti-windup: the integral term's largest speed [m/s]
+    min_approach_mps: Speed  # no cap (approach, turn slowdown) slows the boat below this outside radius_m [m/s]
 
     def __post_init__(self) -> None:
         check(self.approach_radius_m >= self.radius_m, "arrival.approach_radius_m", self.approach_radius_m,
               f">= radius_m ({self.radius_m})")
         check(self.settle_radius_m <= self.radius_m, "arrival.settle_radius_m", self.settle_radius_m,
               f"0 .. radius_m ({self.radius_m})")
+        check(self.reacquire_radius_m > self.radius_m, "arrival.reacquire_radius_m", self.reacquire_radius_m,
+              f"> radius_m ({self.radius_m})")
 
 
 @dataclass(frozen=True)
@@ -129,11 +135,31 @@ class FailsafeSettings:
     # ((N_min, N_max), (E_min, E_max)) [m]
     geofence_ned: tuple[tuple[FiniteFloat, FiniteFloat], tuple[FiniteFloat, FiniteFloat]] | None
     on_exit: ExitMode
+    zero_with_yaw: bool  # zero-velocity commands carry the current heading as yaw (mask 2535): no pivot north
+    stall_s: Seconds  # guiding with less than stall_progress_m of progress along the field for this long [s]
+    stall_progress_m: Annotated[float, Range(0.0, 1000.0, lo_open=True)]  # ... switches to direct pursuit [m]
+    heartbeat_gap_s: Seconds  # a vehicle heartbeat gap this long (wall) re-requests the telemetry streams [s]
 
     def __post_init__(self) -> None:
         if self.geofence_ned is not None:
             for axis, (lo, hi) in zip("NE", self.geofence_ned, strict=True):
                 check(lo < hi, "failsafe.geofence_ned", self.geofence_ned, f"[min, max] with min < max on {axis}")
+
+
+@dataclass(frozen=True)
+class LimitSettings:
+    """Physical bounds on every input (issue 11): anything outside is rejected, counted and logged."""
+
+    max_speed_mps: Annotated[float, Range(0.0, 100.0, lo_open=True)]  # a faster vehicle is not physical [m/s]
+    max_position_m: Annotated[float, Range(0.0, 1e6, lo_open=True)]  # |N| or |E| beyond this [m]
+    max_jump_m: Annotated[float, Range(0.0, 1e4, lo_open=True)]  # a fix this far (+ max speed x time) is a teleport [m]
+    max_turn_rate_dps: Annotated[float, Range(0.0, 3600.0, lo_open=True)]  # |yaw rate| above this [deg/s]
+    max_current_mps: Annotated[float, Range(0.0, 100.0, lo_open=True)]  # a current estimate above this is reset [m/s]
+    clock_window_s: Seconds  # a stamp this far ahead of the vehicle clock (plus elapsed time) is rejected [s]
+    clock_confirm: Annotated[int, Range(1, 100)]  # ... unless this many consecutive stamps agree: a restart
+    teleport_hold_s: Seconds  # hold this long (vehicle time) after the last teleported fix [s]
+    teleport_confirm_s: Seconds  # a jumped position that stays this long with no fix at the old place is taken [s]
+    log_every_s: Seconds  # at most one rejection log line per kind this often (wall) [s]
 
 
 @dataclass(frozen=True)
@@ -152,11 +178,14 @@ class GuidanceConfig:
     arrival: ArrivalSettings
     estimator: EstimatorSettings
     failsafe: FailsafeSettings
+    limits: LimitSettings
     status: StatusSettings
 
     def __post_init__(self) -> None:
         check(bool(VEHICLE_ID.match(self.vehicle_id)), "vehicle_id", self.vehicle_id,
               "1-64 characters of A-Z a-z 0-9 _ -")
+        check(self.limits.max_speed_mps >= self.command.max_speed_mps, "limits.max_speed_mps",
+              self.limits.max_speed_mps, f">= command.max_speed_mps ({self.command.max_speed_mps})")
 
 
 def load(user_file: str | Path | None = None, overrides: dict[str, Any] | None = None) -> GuidanceConfig:

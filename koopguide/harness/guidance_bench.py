@@ -3,7 +3,7 @@
 What is measured, per command rate (10 and 50 Hz by default):
 
 * latency [ms]: from a LOCAL_POSITION_NED datagram being read off the socket to its velocity setpoint
-  having been sent - the daemon's own :attr:`GuidanceDaemon.latency` samples, which it takes for
+  having been sent - the daemon's own samples (:meth:`GuidanceDaemon.drain_latencies`), which it takes for
   fix-triggered commands only (timer-driven commands on a late fix are not in them); p50, p99 and max
   over the samples gathered in the measured window;
 * setpoints/s: velocity setpoints the daemon sent per simulated second over the window (the achieved
@@ -159,7 +159,7 @@ async def measure_rate(model: Path, rate_hz: float, seconds: float) -> RateFigur
             if runner.done():
                 failure = runner.exception() if not runner.cancelled() else None
                 raise BenchError(f"{rate_hz:g} Hz, {step}: the daemon stopped ({failure!r})")
-            code = simulator._proc.poll() if simulator._proc is not None else None
+            code = simulator.poll()
             if code is not None:
                 raise BenchError(f"{rate_hz:g} Hz, {step}: the simulator exited with code {code}")
 
@@ -174,18 +174,18 @@ async def measure_rate(model: Path, rate_hz: float, seconds: float) -> RateFigur
         link = daemon.link
         assert link is not None  # create() opened it
         latencies_ms: list[float] = []
-        daemon.latency.samples.clear()
+        daemon.drain_latencies()  # warm-up samples
         first_transition = len(daemon.transitions)
         sent_0, sim_0, received_0 = daemon.setpoints_sent, daemon.clock.now(), link.stats.received
         wall_0, cpu_0 = time.perf_counter(), time.process_time()
         end = wall_0 + seconds
         while (left := end - time.perf_counter()) > 0:
             await asyncio.sleep(min(POLL_S, left))
-            _drain(daemon.latency.samples, latencies_ms)  # the daemon's window holds 2000; keep them all
+            latencies_ms += daemon.drain_latencies()  # the daemon's window holds 2000; keep them all
             check_alive("measurement")
         cpu_1, wall_1 = time.process_time(), time.perf_counter()
         sent_1, sim_1, received_1 = daemon.setpoints_sent, daemon.clock.now(), link.stats.received
-        _drain(daemon.latency.samples, latencies_ms)
+        latencies_ms += daemon.drain_latencies()
         states = [daemon.transitions[first_transition - 1][1]] if first_transition else []
         states += [state for _, state in daemon.transitions[first_transition:]]
     finally:
@@ -205,11 +205,6 @@ async def measure_rate(model: Path, rate_hz: float, seconds: float) -> RateFigur
         latency_max_ms=worst, samples=len(latencies_ms), cpu_pct=100.0 * (cpu_1 - cpu_0) / wall_s,
         window_wall_s=wall_s, window_sim_s=sim_s, messages_per_s=(received_1 - received_0) / wall_s, states=states,
     )
-
-
-def _drain(source: Any, into: list[float]) -> None:
-    while source:
-        into.append(source.popleft())
 
 
 async def _stopped(runner: asyncio.Task, rate_hz: float) -> None:

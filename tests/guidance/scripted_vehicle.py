@@ -1,9 +1,11 @@
 """A scripted ArduPilot-like vehicle on a real pymavlink socket, for failure-mode tests of the service.
 
 It answers the way Rover does (HEARTBEAT with mode and armed flag, COMMAND_ACK, LOCAL_POSITION_NED and
-ATTITUDE stamped with its own time_boot_ms), moves at the commanded velocity (a point mass), and records
-every setpoint it receives with its own time. A test can pause its positions, or everything (link loss),
-and can inject messages from a foreign system id or raw garbage. Runs on its own thread.
+ATTITUDE stamped with its own time_boot_ms), moves at the commanded velocity through the water plus an
+optional current (a point mass; heading along the commanded velocity), and records every setpoint it
+receives with its own time. A test can pause its positions, or everything (link loss), make it ignore
+setpoints (a stalled boat), reboot it (its clock restarts, MANUAL, disarmed), and inject messages from a
+foreign system id or raw garbage. Runs on its own thread.
 """
 
 from __future__ import annotations
@@ -41,14 +43,18 @@ class ScriptedVehicle:
     armed: bool = False
     pause_positions: bool = False
     silent: bool = False  # nothing at all is sent (link loss)
+    ignore_setpoints: bool = False  # a stalled boat: setpoints are received but not followed
+    current_ned: tuple[float, float] = (0.0, 0.0)  # water current [m/s], added to the velocity
     received: list[Received] = field(default_factory=list)
     _stop: threading.Event = field(default_factory=threading.Event)
 
     def __post_init__(self) -> None:
-        self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.port}", source_system=self.sysid,
-                                               source_component=1, dialect="ardupilotmega")
+        self.conn = mavutil.mavlink_connection(
+            f"udpout:127.0.0.1:{self.port}", source_system=self.sysid, source_component=1, dialect="ardupilotmega"
+        )
         self.n, self.e = self.start_ned
         self.vn = self.ve = 0.0
+        self.heading = 0.0  # [rad] from north
         self.t0 = time.monotonic()
         self.lock = threading.Lock()
         self.thread = threading.Thread(target=self._run, daemon=True)
@@ -89,23 +95,38 @@ class ScriptedVehicle:
         while not self._stop.is_set():
             t = self.t
             self._receive(t)
-            self.n += self.vn * dt
-            self.e += self.ve * dt
+            with self.lock:
+                vn, ve = self.vn + self.current_ned[0], self.ve + self.current_ned[1]
+                self.n += vn * dt
+                self.e += ve * dt
             if not self.silent:
                 if t >= next_hb:
                     next_hb = t + 1.0
                     self.send_heartbeat()
                 ms = int(t * 1000)
                 if not self.pause_positions:
-                    self.conn.mav.local_position_ned_send(ms, self.n, self.e, 0.0, self.vn, self.ve, 0.0)
-                heading = math.atan2(self.ve, self.vn) if math.hypot(self.vn, self.ve) > 1e-6 else 0.0
-                self.conn.mav.attitude_send(ms, 0.0, 0.0, heading, 0.0, 0.0, 0.0)
+                    self.conn.mav.local_position_ned_send(ms, self.n, self.e, 0.0, vn, ve, 0.0)
+                if math.hypot(self.vn, self.ve) > 1e-6:
+                    self.heading = math.atan2(self.ve, self.vn)
+                self.conn.mav.attitude_send(ms, 0.0, 0.0, self.heading, 0.0, 0.0, 0.0)
             time.sleep(dt)
+
+    def reboot(self) -> None:
+        """Restart: the clock from 0 again, MANUAL, disarmed, at rest (telemetry rates back to default)."""
+        with self.lock:
+            self.t0 = time.monotonic()
+            self.mode, self.armed = MANUAL, False
+            self.vn = self.ve = 0.0
 
     def send_heartbeat(self) -> None:
         base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
-        self.conn.mav.heartbeat_send(mavlink.MAV_TYPE_SURFACE_BOAT, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, base,
-                                     self.mode, mavlink.MAV_STATE_ACTIVE)
+        self.conn.mav.heartbeat_send(
+            mavlink.MAV_TYPE_SURFACE_BOAT,
+            mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+            base,
+            self.mode,
+            mavlink.MAV_STATE_ACTIVE,
+        )
 
     def _receive(self, t: float) -> None:
         while True:
@@ -118,9 +139,13 @@ class ScriptedVehicle:
             if kind == "COMMAND_LONG" and not self.silent:
                 self._command(msg)
             elif kind == "SET_POSITION_TARGET_LOCAL_NED" and self.mode == GUIDED and self.armed:
-                self.vn, self.ve = msg.vx, msg.vy
+                self._follow(msg)
             if self.mode != GUIDED:
                 self.vn = self.ve = 0.0
+
+    def _follow(self, msg) -> None:
+        if not self.ignore_setpoints:
+            self.vn, self.ve = msg.vx, msg.vy
 
     def _command(self, msg) -> None:
         if msg.command == mavlink.MAV_CMD_DO_SET_MODE:

@@ -10,7 +10,7 @@ import pytest
 
 from koopguide.base.config import ConfigError
 from koopguide.guidance import settings
-from koopguide.guidance.estimation.clock import VehicleClock
+from koopguide.guidance.estimation.clock import ClockVerdict, VehicleClock
 from koopguide.guidance.estimation.tracker import KalmanTracker
 from koopguide.guidance.law.command import GuidanceLaw, GuidanceState
 from koopguide.guidance.law.frames import ModelFrame
@@ -113,8 +113,11 @@ def test_vehicle_clock_follows_a_speeded_up_vehicle_and_restarts_on_reboot():
     assert clock.rate == pytest.approx(20.0)
     wall[0] += 0.1
     assert clock.now() == pytest.approx(20.0 * 1.95 + 100.0 + 2.0)
-    clock.observe(1.0)
-    assert clock.reboots == 1 and clock.now() == pytest.approx(1.0)
+    # a reboot: time goes back; one stamp is not enough (it could be forged or corrupt), three in a row are
+    assert clock.observe(1.0) is ClockVerdict.BEHIND and clock.now() > 100.0
+    assert clock.observe(1.05) is ClockVerdict.BEHIND
+    assert clock.observe(1.1) is ClockVerdict.REBOOT
+    assert clock.reboots == 1 and clock.now() == pytest.approx(1.1)
 
 
 @pytest.mark.parametrize(("overrides", "expected"), [

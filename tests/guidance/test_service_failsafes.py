@@ -81,10 +81,13 @@ def test_stale_positions_give_zero_velocity_within_a_cycle_then_guidance_resumes
             await until(lambda: daemon.state.value == "guiding", 5.0)
             await asyncio.sleep(0.5)
             assert any(speed(r) > 0.05 for r in boat.setpoints(since=t_back))
-            # every setpoint is velocity-only in LOCAL_NED, never above the limit
+            # every setpoint in LOCAL_NED, never above the limit; moving: velocity only (3559); zero (the
+            # hold): velocity + yaw at the boat's heading (2535), so that Rover does not turn north
             for r in boat.setpoints():
-                assert r.msg.type_mask == 3559 and r.msg.coordinate_frame == 1
-                assert speed(r) <= cfg.command.max_speed_mps + 1e-9
+                assert r.msg.coordinate_frame == 1 and speed(r) <= cfg.command.max_speed_mps + 1e-9
+                assert r.msg.type_mask == (3559 if speed(r) > 0 else 2535)
+            held = [r for r in late if r.msg.type_mask == 2535]
+            assert held and all(abs(r.msg.yaw - held[0].msg.yaw) < 1e-6 for r in held)
 
     asyncio.run(scenario())
 
@@ -119,9 +122,9 @@ def test_foreign_system_and_garbage_are_ignored(zshape_model: Path) -> None:
                     spoofer.conn.write(b"\xfd\x09garbage-bytes-not-mavlink\x00\x01")
                     await asyncio.sleep(0.02)
                 await asyncio.sleep(1.0)
-            p, _ = daemon.tracker.predict(daemon.clock.now())
+            p, _ = daemon.estimate()
             assert math.hypot(p[0] - boat.n, p[1] - boat.e) < 0.2, "the spoofed position must not be used"
-            assert daemon.view.mode == GUIDED and daemon.view.armed
+            assert daemon.supervisor.mode == GUIDED and daemon.supervisor.armed
             assert daemon.link.stats.foreign > 10 and daemon.link.stats.corrupt > 0
             assert daemon.state.value == "guiding"
 
@@ -231,7 +234,7 @@ def test_a_lost_tcp_link_is_reopened_with_back_off(zshape_model: Path) -> None:
             assert not task.done() and not daemon.link.connected
             with SimulationThread(sim_cfg):
                 await until(lambda: daemon.link.stats.reconnects >= 1, 10.0)
-                await until(lambda: daemon.view.link_up(time.monotonic(), 3.0) and daemon.position_age() is not None
+                await until(lambda: daemon.supervisor.link_up(time.monotonic()) and daemon.position_age() is not None
                             and daemon.position_age() < 0.5, 10.0)
         finally:
             if daemon is not None:

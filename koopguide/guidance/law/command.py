@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -59,11 +59,13 @@ GRID_CACHE_SIZE = 4  # sampled grids kept (per size and placement)
 
 @dataclass(frozen=True)
 class Setpoint:
-    """One decision: the NED velocity to send [m/s], the resulting state and why (for hold/fault)."""
+    """One decision: the NED velocity to send [m/s], the resulting state and why (for hold/fault);
+    ``ground_ned``: the ground velocity the law wanted [m/s] (before crabbing and slowing), when guiding."""
 
     velocity_ned: np.ndarray
     state: GuidanceState
     reason: str | None = None
+    ground_ned: np.ndarray | None = None
 
     @property
     def yaw_rad(self) -> float | None:
@@ -79,8 +81,14 @@ def hold(reason: str) -> Setpoint:
 class GuidanceLaw:
     """Field + frame + limits. ``decide`` maps an estimated NED position to a :class:`Setpoint`."""
 
-    def __init__(self, field: FlowField, frame: ModelFrame, command: CommandSettings, arrival: ArrivalSettings,
-                 failsafe: FailsafeSettings) -> None:
+    def __init__(
+        self,
+        field: FlowField,
+        frame: ModelFrame,
+        command: CommandSettings,
+        arrival: ArrivalSettings,
+        failsafe: FailsafeSettings,
+    ) -> None:
         if field.dim != 2:
             raise ValueError(f"the guidance service steers in the plane: the model has dim {field.dim}, expected 2")
         self.field = field
@@ -100,6 +108,10 @@ class GuidanceLaw:
         """The law for ``field`` placed and limited as ``cfg`` says."""
         return cls(field, ModelFrame.place(field.goal, cfg.frame), cfg.command, cfg.arrival, cfg.failsafe)
 
+    def place_goal(self, goal_ned: tuple[float, float]) -> None:
+        """Move the model's goal to ``goal_ned`` [m] (a geodetic goal, once placed in local NED)."""
+        self.frame = replace(self.frame, goal_ned=(float(goal_ned[0]), float(goal_ned[1])))
+
     @property
     def goal_ned(self) -> np.ndarray:
         return np.asarray(self.frame.goal_ned, dtype=float)
@@ -112,8 +124,9 @@ class GuidanceLaw:
         x = np.clip(self.frame.to_model(p_ned), self.domain_lo, self.domain_hi)
         return self.gain * self.frame.direction_to_ned(self.field.velocity(x))
 
-    def decide(self, p_ned: np.ndarray, arrived: bool, heading_rad: float | None = None,
-               current_ned: np.ndarray | None = None) -> Setpoint:
+    def decide(
+        self, p_ned: np.ndarray, arrived: bool, heading_rad: float | None = None, current_ned: np.ndarray | None = None
+    ) -> Setpoint:
         """The setpoint at estimated position ``p_ned``; ``arrived`` is sticky once reached.
 
         ``heading_rad`` (the vehicle's heading from north, when known) slows the command while the boat
@@ -132,9 +145,7 @@ class GuidanceLaw:
         distance = self.distance_to_goal(p_ned)
         to_goal = (self.goal_ned - p_ned) / distance if distance > 1e-9 else ZERO
         if arrived or distance <= self.arrival.radius_m:  # keep station at the goal
-            speed = min(self.arrival.station_gain * distance, self.command.max_speed_mps,
-                        self.approach_cap(distance, to_goal, current_ned))
-            v = self.steer(to_goal * speed, heading_rad, current_ned, CRAB_MIN_SPEED_MPS)
+            v = self.steer(self.station_velocity(p_ned, current_ned), heading_rad, current_ned, CRAB_MIN_SPEED_MPS)
             return Setpoint(v, GuidanceState.ARRIVED)
         x = self.frame.to_model(p_ned)
         x0 = np.clip(x, self.domain_lo, self.domain_hi)
@@ -156,10 +167,31 @@ class GuidanceLaw:
         # boat circling it at the speed floor never turns tightly enough to get in: head for the goal,
         # turning on the spot when facing away.
         direction = to_goal if captured else direction / float(np.hypot(*direction))
-        speed = min(max(speed, self.command.min_speed_mps), self.command.max_speed_mps,  # over ground
-                    self.approach_cap(distance, direction, current_ned))
+        # The approach cap is a model of the boat (it turns to face the current while it still moves); it
+        # never slows the boat below min_approach_mps, or a boat unlike the model stalls short of the goal.
+        cap = max(self.approach_cap(distance, direction, current_ned), self.arrival.min_approach_mps)
+        speed = min(max(speed, self.command.min_speed_mps), self.command.max_speed_mps, cap)  # over ground
+        # Captured and facing away, a skid-steer boat turns on the spot (the turn slowdown's floor); a boat
+        # that cannot (a rudder boat) makes no progress, and the progress watchdog switches to pursuit.
         floor = CRAB_MIN_SPEED_MPS if captured else self.command.min_speed_mps
-        return Setpoint(self.steer(direction * speed, heading_rad, current_ned, floor), GuidanceState.GUIDING)
+        wanted = direction * speed
+        return Setpoint(self.steer(wanted, heading_rad, current_ned, floor), GuidanceState.GUIDING, ground_ned=wanted)
+
+    def station_velocity(self, p_ned: np.ndarray, current_ned: np.ndarray | None) -> np.ndarray:
+        """Keeping station: the ground velocity [m/s] toward the goal, ``station_gain`` per metre from it, no
+        faster than keeps the boat facing into the current (:meth:`approach_cap`) - the proportional term;
+        the supervisor's :class:`~koopguide.guidance.law.station.StationKeeper` adds the integral."""
+        offset = self.goal_ned - np.asarray(p_ned, dtype=float)
+        distance = float(np.hypot(*offset))
+        if distance <= 1e-9:
+            return ZERO.copy()
+        to_goal = offset / distance
+        speed = min(
+            self.arrival.station_gain * distance,
+            self.command.max_speed_mps,
+            self.approach_cap(distance, to_goal, current_ned),
+        )
+        return to_goal * speed
 
     def approach_cap(self, distance: float, direction: np.ndarray, current_ned: np.ndarray | None) -> float:
         """The largest ground speed [m/s] along ``direction`` that keeps the boat facing into the current.
@@ -187,8 +219,9 @@ class GuidanceLaw:
             return math.inf
         return c_norm * math.sin(theta) / math.sin(theta + alpha)
 
-    def steer(self, v_ground: np.ndarray, heading_rad: float | None, current_ned: np.ndarray | None,
-              floor_mps: float) -> np.ndarray:
+    def steer(
+        self, v_ground: np.ndarray, heading_rad: float | None, current_ned: np.ndarray | None, floor_mps: float
+    ) -> np.ndarray:
         """The setpoint that moves the boat over ground at ``v_ground``: crabbed into the estimated current
         (``current_compensation``), then slowed by cos(heading error) while the boat turns onto it
         (``turn_slowdown``), but not below ``floor_mps`` (nor above the unslowed speed)."""
@@ -288,8 +321,12 @@ def crab(v_ground: np.ndarray, current_ned: np.ndarray, glide_limit_rad: float =
     # ... but no further than glide_limit_rad off upstream: a boat turned across the current is swept off
     off = math.atan2(upstream[0] * h[1] - upstream[1] * h[0], float(upstream @ h))
     off = min(max(off, -glide_limit_rad), glide_limit_rad)
-    h = np.array([upstream[0] * math.cos(off) - upstream[1] * math.sin(off),
-                  upstream[0] * math.sin(off) + upstream[1] * math.cos(off)])
+    h = np.array(
+        [
+            upstream[0] * math.cos(off) - upstream[1] * math.sin(off),
+            upstream[0] * math.sin(off) + upstream[1] * math.cos(off),
+        ]
+    )
     return h * CRAB_MIN_SPEED_MPS
 
 

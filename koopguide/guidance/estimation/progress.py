@@ -1,0 +1,50 @@
+"""ProgressWatchdog: is the boat still getting closer to the goal along the field? (pure, no I/O)
+
+The distance made good along the wanted track is the odometer
+
+    s(t) = sum over fixes of (p_k - p_{k-1}) . d_{k-1}     [m]
+
+with ``d`` the unit direction the guidance wanted over ground at the previous fix (the field's streamline,
+or the straight line to the goal in direct pursuit). Following the field, s grows at the boat's speed; a
+boat that stalls, circles or is held off by a current makes none. A boat that overshoots a turn of the
+field loses some s while it comes back (yet gets closer to the goal), so progress is measured from the
+best so far of both s and the straight-line distance to the goal: stalled when neither has improved by
+``stall_progress_m`` for ``stall_s``. Conventions: NED [m], vehicle seconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class ProgressWatchdog:
+    def __init__(self, stall_s: float, stall_progress_m: float) -> None:
+        self.stall_s = stall_s
+        self.stall_progress_m = stall_progress_m
+        self.odometer = 0.0  # distance made good along the wanted directions [m]
+        self._mark: tuple[float, float, float] | None = None  # (t, odometer, -distance) at the last progress
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # (position, unit direction) of the last update
+
+    def reset(self) -> None:
+        self.odometer = 0.0
+        self._mark = None
+        self._last = None
+
+    def update(self, t: float, p_ned: np.ndarray, wanted_ned: np.ndarray | None, distance_m: float) -> bool:
+        """Fold in position ``p_ned`` at ``t``, the wanted ground velocity there and the distance to the goal;
+        True when stalled."""
+        p = np.asarray(p_ned, dtype=float)
+        if self._last is not None:
+            self.odometer += float((p - self._last[0]) @ self._last[1])
+        norm = float(np.hypot(*wanted_ned)) if wanted_ned is not None else 0.0
+        direction = np.asarray(wanted_ned, dtype=float) / norm if norm > 1e-12 else np.zeros(2)
+        self._last = (p, direction)
+        mark, step = self._mark, self.stall_progress_m
+        if mark is None or self.odometer >= mark[1] + step or -distance_m >= mark[2] + step:
+            best = (
+                (self.odometer, -distance_m)
+                if mark is None
+                else (max(self.odometer, mark[1]), max(-distance_m, mark[2]))
+            )
+            self._mark = (t, *best)
+        return t - self._mark[0] >= self.stall_s

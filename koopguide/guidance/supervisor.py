@@ -1,0 +1,376 @@
+"""The guidance supervisor: a pure state machine from typed events to decisions (no I/O, no clocks).
+
+    events (heartbeat, position fix, attitude, global fix, clock restart, rejected input, tick)
+      -> InputGate / TeleportGuard -> KalmanTracker, CurrentEstimator -> GuidanceLaw / StationKeeper
+      -> Decision (setpoint, state, reason, degraded, requests: set mode, arm, message intervals)
+
+States (docs/guidance.md): waiting (no heartbeat, no position, not in GUIDED, disarmed) -> guiding ->
+arrived; hold (stale position, teleporting positions, outside the domain or geofence); fault (the field
+failed, or setpoints stopped going out). ``arrived`` is left for ``guiding`` when the boat drifts beyond
+``arrival.reacquire_radius_m``; ``degraded`` marks guiding by direct pursuit of the goal after the
+progress watchdog saw no progress along the field for ``failsafe.stall_s``. Every decision has a reason.
+
+Time is passed in: ``t_s`` the vehicle's clock [s], ``wall_s`` the service's monotonic clock [s] (heartbeat
+timeouts, request retries, log rate). Conventions: local NED [m], [m/s]; headings [rad] from north.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from koopguide.guidance import events as ev
+from koopguide.guidance import vehicle as rover
+from koopguide.guidance.estimation.progress import ProgressWatchdog
+from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceLaw, GuidanceState, along_current
+from koopguide.guidance.law.station import StationKeeper
+from koopguide.guidance.requests import RequestSchedule
+from koopguide.guidance.settings import ArrivalAction, GuidanceConfig
+from koopguide.guidance.vehicle_state import VehicleState
+
+OUTPUT_GAP_PERIODS = 2.0  # no setpoint for this many command periods while guiding/arrived: fault
+ZERO = (0.0, 0.0)
+S = GuidanceState
+
+
+class Supervisor:
+    """Feed events with :meth:`handle`; a ``Tick`` returns the decision. Read ``take_notes()`` to log."""
+
+    def __init__(self, cfg: GuidanceConfig, law: GuidanceLaw) -> None:
+        self.cfg, self.law = cfg, law
+        self.period = 1.0 / cfg.command.rate_hz  # vehicle seconds between setpoints
+        self.vehicle = VehicleState(cfg)  # checked estimates: position, velocity, heading, current
+        self.station = StationKeeper(
+            cfg.arrival.station_gain,
+            cfg.arrival.integral_gain_per_s2,
+            cfg.arrival.integral_limit_mps,
+            cfg.command.max_speed_mps,
+            deadband_m=cfg.arrival.radius_m,
+        )
+        self.progress = ProgressWatchdog(cfg.failsafe.stall_s, cfg.failsafe.stall_progress_m)
+        # the vehicle's heartbeat (service clock)
+        self.heartbeat_wall: float | None = None
+        self.mode: int | None = None
+        self.armed: bool | None = None
+        # the state machine
+        self.state, self.reason, self.degraded = S.IDLE, "not started", False
+        self.arrived = False  # within the arrival radius and not since drifted beyond the reacquire radius
+        self.back_reason = ""  # why guiding again after an arrival (until the next one)
+        self.arrived_t: float | None = None  # vehicle time of the first arrival [s]
+        self.settled = False  # handed over to LOITER/HOLD after arrival
+        self.reclaim = False  # drifted off after the hand-over: take GUIDED back
+        self.engaged = False  # GUIDED confirmed once; afterwards a mode change is the pilot's
+        self.goal_placed = cfg.frame.goal_latlon is None
+        self.last_sent_t: float | None = None  # vehicle time of the last setpoint that went out
+        self.output_fault = False
+        self.link_was_up = False
+        self.schedule = RequestSchedule(cfg)  # mode, arm and telemetry requests, and their retries
+        self.transitions: list[tuple[float, str]] = []  # (vehicle time, state) on each change
+        self.restarts = 0  # vehicle clock restarts seen (reboots and jumps)
+        self._notes: list[ev.Note] = []
+
+    # ------------------------------------------------------------------------------ events
+    def handle(self, event: ev.Event) -> ev.Decision | None:
+        """Fold in one event; a :class:`~koopguide.guidance.events.Tick` returns the decision for that moment."""
+        if isinstance(event, ev.Tick):
+            return self.decide(event)
+        if isinstance(event, ev.PositionFix):
+            self.on_position(event)
+        elif isinstance(event, ev.Heartbeat):
+            self.on_heartbeat(event)
+        elif isinstance(event, ev.Attitude):
+            self.vehicle.on_attitude(event)
+        elif isinstance(event, ev.GlobalFix):
+            self.vehicle.on_global(event)
+            self._place_geodetic_goal()
+        elif isinstance(event, ev.ClockRestart):
+            self.on_clock_restart(event)
+        elif isinstance(event, ev.InputRejected):
+            self.vehicle.gate.reject(event.kind, event.detail, event.wall_s)
+        return None
+
+    def on_heartbeat(self, hb: ev.Heartbeat) -> None:
+        first = not self.link_up(hb.wall_s)
+        gap = None if self.heartbeat_wall is None else hb.wall_s - self.heartbeat_wall
+        if first or (gap is not None and gap > self.cfg.failsafe.heartbeat_gap_s):
+            self.schedule.streams_due = True  # (re)request telemetry: the vehicle may have rebooted
+            if not first:
+                self._note(logging.WARNING, f"vehicle heartbeat gap of {gap:.1f} s; requesting telemetry again")
+        self.heartbeat_wall, self.mode, self.armed = hb.wall_s, hb.mode, hb.armed
+        if first:
+            self._note(
+                logging.INFO,
+                f"vehicle heartbeat: mode {rover.mode_name(hb.mode)}, {'armed' if hb.armed else 'disarmed'}",
+            )
+        if hb.mode == rover.GUIDED:
+            self.reclaim = False
+            if not self.engaged:
+                self.engaged = True
+                self._note(logging.INFO, "vehicle in GUIDED")
+        self.link_was_up = True
+
+    def on_position(self, fix: ev.PositionFix) -> bool:
+        """Fold in a fix; False when it was rejected (out of bounds, out of order, a teleport)."""
+        if not self.vehicle.on_position(fix):
+            return False
+        self._place_geodetic_goal()
+        if self.arrived:  # status honesty: leave arrived on the fix that shows the drift, not a tick later
+            p, _ = self.vehicle.tracker.predict(fix.t_s)
+            self._check_reacquire(self.law.distance_to_goal(p), fix.t_s)
+        return True
+
+    def update_current(self, t: float) -> None:
+        """After the command (the current changes over tens of seconds): the fix at ``t`` into the current."""
+        self.vehicle.update_current(t)
+
+    def on_clock_restart(self, restart: ev.ClockRestart) -> None:
+        what = "went back (a reboot)" if restart.rebooted else "jumped forward"
+        self._note(
+            logging.WARNING,
+            f"vehicle clock {what} from {restart.previous_s:.3f} s to {restart.t_s:.3f} s: "
+            "estimates reset, command schedule re-armed, telemetry requested again",
+        )
+        self.restarts += 1
+        self._restart_estimates(forget_fixes=True)
+        self.last_sent_t, self.output_fault = None, False
+        self.schedule.streams_due = True
+        if restart.rebooted:
+            self.engaged = False  # a rebooted vehicle's mode is not the pilot's choice: take GUIDED again
+
+    def setpoint_sent(self, t: float) -> None:
+        """The service put a setpoint on the wire at vehicle time ``t``."""
+        self.last_sent_t = t
+        self.output_fault = False
+
+    # ------------------------------------------------------------------------------ decisions
+    def link_up(self, wall: float) -> bool:
+        return self.heartbeat_wall is not None and wall - self.heartbeat_wall <= self.cfg.mavlink.link_timeout_s
+
+    def position_age(self, now: float) -> float | None:
+        return self.vehicle.position_age(now)
+
+    def check_output(self, tick: ev.Tick) -> ev.Decision | None:
+        """The watchdog of the service's own output: guiding or arrived in GUIDED, yet no setpoint for
+        OUTPUT_GAP_PERIODS command periods, is a fault (zero velocity, and the reason)."""
+        if self.state not in (S.GUIDING, S.ARRIVED) or self.mode != rover.GUIDED or self.last_sent_t is None:
+            return None
+        gap = tick.t_s - self.last_sent_t
+        if gap <= OUTPUT_GAP_PERIODS * self.period:
+            return None
+        self.output_fault = True
+        return self._out(
+            ZERO,
+            S.FAULT,
+            f"no setpoint sent for {gap:.2f} s (over {OUTPUT_GAP_PERIODS:g} command periods of {self.period:.3f} s)",
+            send=True,
+            t=tick.t_s,
+        )
+
+    def decide(self, tick: ev.Tick) -> ev.Decision:
+        now, wall, cfg = tick.t_s, tick.wall_s, self.cfg
+        in_guided = self.mode == rover.GUIDED
+        if not self.link_up(wall):
+            if self.link_was_up:
+                self.link_was_up = False
+                self._note(
+                    logging.WARNING,
+                    f"vehicle heartbeat lost for {cfg.mavlink.link_timeout_s:.1f} s; waiting for the link",
+                )
+            return self._out(ZERO, S.WAITING, "no vehicle heartbeat", send=False, t=now)
+        requests = self.schedule.streams(self.position_age(now), wall)
+        age = self.position_age(now)
+        if age is None:
+            return self._out(ZERO, S.WAITING, "waiting for LOCAL_POSITION_NED", in_guided, now, requests)
+        if age > cfg.failsafe.stale_after_s:
+            return self._out(ZERO, S.HOLD, f"no fresh position for {age:.2f} s", in_guided, now, requests)
+        if now < self.vehicle.teleport_until:
+            return self._out(ZERO, S.HOLD, self.vehicle.teleport_reason, in_guided, now, requests)
+        if not self.goal_placed:
+            return self._out(
+                ZERO, S.WAITING, "waiting for GLOBAL_POSITION_INT to place the goal", in_guided, now, requests
+            )
+        if self.settled:
+            return self._handed_over(now, wall, requests)
+        if not in_guided:
+            if self.engaged and not self.reclaim:
+                return self._out(
+                    ZERO,
+                    S.WAITING,
+                    f"vehicle left GUIDED (now {rover.mode_name(self.mode)}); not taking it back",
+                    False,
+                    now,
+                    requests,
+                )
+            requests += self.schedule.once_per_retry("mode", ev.SetMode(rover.GUIDED), wall)
+            return self._out(ZERO, S.WAITING, "switching the vehicle to GUIDED", False, now, requests)
+        if not self.armed:
+            if cfg.arm:
+                requests += self.schedule.once_per_retry("arm", ev.Arm(), wall)
+                return self._out(ZERO, S.WAITING, "arming", True, now, requests)
+            return self._out(ZERO, S.WAITING, "vehicle disarmed (arm it, or run with --arm)", True, now, requests)
+        return self._guide(now, wall, requests)
+
+    def _handed_over(self, now: float, wall: float, requests: list[ev.Request]) -> ev.Decision:
+        keep = rover.LOITER if self.cfg.arrival.on_arrival is ArrivalAction.LOITER else rover.HOLD
+        in_guided = self.mode == rover.GUIDED
+        if self.mode != keep and in_guided:
+            requests += self.schedule.once_per_retry("mode", ev.SetMode(keep), wall)
+        return self._out(ZERO, S.ARRIVED, f"arrived; {rover.mode_name(keep)} holds the boat", in_guided, now, requests)
+
+    def _guide(self, now: float, wall: float, requests: list[ev.Request]) -> ev.Decision:
+        cfg, law = self.cfg, self.law
+        p, _ = self.vehicle.tracker.predict(now + cfg.command.lead_s)
+        heading = self.vehicle.heading_at(now)
+        estimator = self.vehicle.current
+        current = estimator.current_ned if heading is not None and estimator.updates else None
+        distance = law.distance_to_goal(p)
+        if self.arrived:
+            self._check_reacquire(distance, now)
+        elif distance <= cfg.arrival.radius_m:
+            self.arrived, self.degraded, self.back_reason = True, False, ""
+            self.arrived_t = now if self.arrived_t is None else self.arrived_t
+            self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s")
+        error = law.goal_ned - p
+        # After a drift-off, within the capture radius: back onto the goal with the station keeping control
+        # (honestly reported as guiding), not the approach's speed floor that would overshoot the goal.
+        drifted_near = bool(self.back_reason) and distance <= cfg.arrival.capture_radius_m and not self.degraded
+        if self.arrived or drifted_near:
+            wanted = self.station.update(now, error, law.station_velocity(p, current))  # P (capped) + I
+            v = law.steer(wanted, heading, current, CRAB_MIN_SPEED_MPS)
+            if drifted_near:
+                if self.progress.update(now, p, wanted, distance):
+                    return self._start_pursuit(now, wall, distance, requests)
+                reason = f"{self.back_reason}keeping station onto the goal, {distance:.2f} m away"
+                return self._out(tuple(v), S.GUIDING, reason, True, now, requests)
+            keep_station = cfg.arrival.on_arrival is ArrivalAction.STATION_KEEP
+            if not keep_station and self._settle(distance, heading, current, now):
+                return self._handed_over(now, wall, requests)
+            return self._out(
+                tuple(v),
+                S.ARRIVED,
+                f"{distance:.2f} m from the goal (within reacquire_radius_m "
+                f"{cfg.arrival.reacquire_radius_m:g}); keeping station",
+                True,
+                now,
+                requests,
+            )
+        if self.degraded:
+            wanted = self.station.update(now, error)
+            speed = float(np.hypot(*wanted))
+            floor = cfg.arrival.min_approach_mps
+            if 1e-12 < speed < floor:
+                wanted = wanted * (floor / speed)
+            v = law.steer(wanted, heading, current, floor)
+            stalled = self.progress.update(now, p, wanted, distance)
+            why = " (no progress in direct pursuit either)" if stalled else ""
+            return self._out(
+                tuple(v),
+                S.GUIDING,
+                f"direct pursuit of the goal, {distance:.2f} m away: no progress "
+                f"along the field for {cfg.failsafe.stall_s:g} s{why}",
+                True,
+                now,
+                requests,
+            )
+        sp = law.decide(p, False, heading, current)
+        if sp.state is S.GUIDING and self.progress.update(now, p, sp.ground_ned, distance):
+            return self._start_pursuit(now, wall, distance, requests)
+        reason = sp.reason or f"{self.back_reason}following the field, {distance:.2f} m from the goal"
+        return self._out(tuple(sp.velocity_ned), sp.state, reason, True, now, requests)
+
+    def _start_pursuit(self, now: float, wall: float, distance: float, requests: list[ev.Request]) -> ev.Decision:
+        self.degraded = True
+        self.progress.reset()
+        why = f"no progress along the field for {self.cfg.failsafe.stall_s:g} s, {distance:.2f} m from the goal"
+        self._note(logging.WARNING, f"{why}: switching to direct pursuit")
+        return self._guide(now, wall, requests)
+
+    def _settle(self, distance: float, heading: float | None, current: np.ndarray | None, now: float) -> bool:
+        """loiter/hold on arrival: steer on onto the goal, facing along the current, then hand over (LOITER holds
+        the point where it is switched on; a boat turns too slowly to face the current once LOITER has it)."""
+        arrival = self.cfg.arrival
+        done = distance <= arrival.settle_radius_m and along_current(heading, current, arrival.facing_deg)
+        if not (done or now - self.arrived_t >= arrival.settle_timeout_s):
+            return False
+        self.settled = True
+        self._note(
+            logging.INFO,
+            f"settled {distance:.3f} m from the goal after {now - self.arrived_t:.1f} s; "
+            f"switching to {arrival.on_arrival.value.upper()}",
+        )
+        return True
+
+    def reacquire_if_drifted(self, distance: float, now: float) -> None:
+        """Leave arrived for guiding if ``distance`` [m] from the goal is beyond reacquire_radius_m."""
+        if self.arrived:
+            self._check_reacquire(distance, now)
+
+    def _check_reacquire(self, distance: float, now: float) -> None:
+        limit = self.cfg.arrival.reacquire_radius_m
+        if distance <= limit:
+            return
+        reason = f"drifted {distance:.2f} m from the goal, beyond reacquire_radius_m {limit:g}: guiding back"
+        self.back_reason = reason.replace(": guiding back", "; ")
+        self._note(logging.WARNING, reason)
+        self.arrived, self.reclaim = False, self.settled
+        self.settled = self.degraded = False
+        self.progress.reset()  # the station keeper's integral stays: a bias of the boat or the current
+        self._set_state(S.GUIDING, reason, now)
+
+    def _restart_estimates(self, forget_fixes: bool = False) -> None:
+        self.vehicle.restart(forget_fixes)
+        self.station.reset()
+        self.progress.reset()
+        self.degraded = False
+
+    # ------------------------------------------------------------------------------ output
+    def _out(
+        self,
+        v: tuple[float, float],
+        state: S,
+        reason: str,
+        send: bool,
+        t: float,
+        requests: list[ev.Request] | tuple[ev.Request, ...] = (),
+    ) -> ev.Decision:
+        if self.output_fault and state in (S.GUIDING, S.ARRIVED):
+            state, reason = S.FAULT, f"setpoints are not going out ({self.reason})"
+        self._set_state(state, reason, t)
+        velocity = (float(v[0]), float(v[1])) if send else None
+        yaw = None
+        if velocity is not None:
+            moving = math.hypot(*velocity) > 1e-9
+            if moving and self.cfg.command.with_yaw:
+                yaw = math.atan2(velocity[1], velocity[0])
+            elif not moving and self.cfg.failsafe.zero_with_yaw:
+                yaw = self.vehicle.heading_rad  # speed 0 at the current heading: Rover would otherwise turn north
+        return ev.Decision(velocity, yaw, state, reason, self.degraded and state is S.GUIDING, tuple(requests))
+
+    def zero_setpoint(self) -> tuple[tuple[float, float], float | None]:
+        """Zero velocity, and the yaw that goes with it (the current heading, when so configured and known)."""
+        return ZERO, self.vehicle.heading_rad if self.cfg.failsafe.zero_with_yaw else None
+
+    def _set_state(self, state: S, reason: str, t: float) -> None:
+        if state is not self.state:
+            level = logging.WARNING if state in (S.HOLD, S.FAULT) else logging.INFO
+            self._note(level, f"state {state.value}: {reason}")
+            self.transitions.append((t, state.value))
+        self.state, self.reason = state, reason
+
+    def _place_geodetic_goal(self) -> None:
+        goal = self.cfg.frame.goal_latlon
+        goal_ned = None if self.goal_placed or goal is None else self.vehicle.geodetic_to_local(goal)
+        if goal_ned is not None:
+            self.law.place_goal(goal_ned)
+            self.goal_placed = True
+            self._note(logging.INFO, f"geodetic goal {goal[0]:.7f}, {goal[1]:.7f} placed at NED {goal_ned} m")
+
+    def _note(self, level: int, text: str) -> None:
+        self._notes.append(ev.Note(level, text))
+
+    def take_notes(self) -> list[ev.Note]:
+        """The log lines since the last call (the supervisor's and the input gate's)."""
+        notes, self._notes = self._notes + self.vehicle.take_notes(), []
+        return notes

@@ -1,0 +1,359 @@
+"""The guidance supervisor without sockets: every transition, driven by typed events and a point-mass boat.
+
+Times are passed in (vehicle ``t`` and wall ``wall`` advance together here, as for a real vehicle).
+The boat of :meth:`Bench.fly` moves over ground at its setpoint plus an optional current (a boat whose
+speed through the water follows the setpoint: the case the model-based compensation does not assume).
+Conventions: local NED [m], [m/s]; headings [rad] from north.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from koopguide.guidance import settings
+from koopguide.guidance.events import (
+    Arm,
+    Attitude,
+    ClockRestart,
+    GlobalFix,
+    Heartbeat,
+    InputRejected,
+    MessageInterval,
+    PositionFix,
+    SetMode,
+    Tick,
+)
+from koopguide.guidance.law.command import GuidanceLaw, GuidanceState
+from koopguide.guidance.supervisor import Supervisor
+from koopguide.guidance.vehicle import GUIDED, LOITER, ROVER_MODES
+from koopguide.model.field import load_field
+
+S = GuidanceState
+DT = 0.05  # fix interval [s]
+MANUAL = ROVER_MODES["MANUAL"]
+
+
+class Bench:
+    """A supervisor with a clock, and a point-mass boat it guides."""
+
+    def __init__(self, model: Path, **overrides) -> None:
+        base = {"arm": True, "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0}}
+        for key, value in overrides.items():
+            base[key] = {**base.get(key, {}), **value} if isinstance(value, dict) else value
+        self.cfg = settings.load(overrides=base)
+        self.sup = Supervisor(self.cfg, GuidanceLaw.from_config(load_field(model), self.cfg))
+        self.t = 10.0  # vehicle time [s]
+        self.wall = 1000.0  # service clock [s]
+        self.p = np.array([1.5, -1.5])
+        self.v = np.zeros(2)
+        self.heading = 0.0  # the boat's heading [rad]
+        self.reported_heading = 0.0  # the heading of the last ATTITUDE [rad]
+
+    def advance(self, dt: float = DT) -> None:
+        self.t += dt
+        self.wall += dt
+
+    def heartbeat(self, mode: int = GUIDED, armed: bool = True) -> None:
+        self.sup.handle(Heartbeat(self.wall, mode, armed))
+
+    def fix(self, p=None, v=None, t: float | None = None) -> bool:
+        p = self.p if p is None else p
+        v = self.v if v is None else v
+        t = self.t if t is None else t
+        return self.sup.on_position(PositionFix(self.wall, t, (float(p[0]), float(p[1])), (float(v[0]), float(v[1]))))
+
+    def attitude(self) -> None:
+        self.reported_heading = self.heading
+        self.sup.handle(Attitude(self.wall, self.t, self.heading, 0.0))
+
+    def tick(self):
+        return self.sup.handle(Tick(self.wall, self.t))
+
+    def fly(
+        self,
+        seconds: float,
+        current=(0.0, 0.0),
+        obey: bool = True,
+        heartbeat_every_s: float = 1.0,
+        response: float = 1.0,
+    ):
+        """Fix, attitude, decision, move: ``seconds`` of vehicle time; the decisions. The boat makes good
+        ``response`` times the setpoint through the water (1: exactly the setpoint)."""
+        decisions = []
+        next_hb = self.t
+        for _ in range(round(seconds / DT)):
+            if self.t >= next_hb:
+                self.heartbeat()
+                next_hb += heartbeat_every_s
+            self.fix()
+            self.attitude()
+            d = self.tick()
+            if d.velocity_ned is not None:
+                self.sup.setpoint_sent(self.t)
+                if obey:
+                    self.v = response * np.array(d.velocity_ned) + np.asarray(current)
+                    if math.hypot(*d.velocity_ned) > 1e-9:
+                        self.heading = math.atan2(d.velocity_ned[1], d.velocity_ned[0])
+            if not obey:
+                self.v = np.asarray(current, dtype=float)
+            self.sup.update_current(self.t)
+            self.p = self.p + self.v * DT
+            self.advance()
+            decisions.append(d)
+        return decisions
+
+
+@pytest.fixture
+def bench(zshape_model: Path) -> Bench:
+    return Bench(zshape_model)
+
+
+def test_waiting_then_guided_armed_and_streams_requested_with_retries(bench: Bench) -> None:
+    d = bench.tick()
+    assert d.state is S.WAITING and d.reason == "no vehicle heartbeat" and d.velocity_ned is None
+    bench.heartbeat(MANUAL, armed=False)
+    d = bench.tick()
+    assert d.state is S.WAITING and d.reason == "waiting for LOCAL_POSITION_NED" and d.velocity_ned is None
+    assert d.requests == (MessageInterval(32, 20.0), MessageInterval(30, 10.0))  # the telemetry first
+    bench.fix()
+    d = bench.tick()
+    assert d.state is S.WAITING and d.velocity_ned is None  # not in GUIDED: nothing to send
+    assert d.requests == (SetMode(GUIDED),)
+    bench.advance(0.3)
+    bench.fix()
+    assert SetMode(GUIDED) not in bench.tick().requests  # retried only after command_retry_s
+    bench.advance(0.8)
+    bench.fix()
+    assert SetMode(GUIDED) in bench.tick().requests
+    bench.heartbeat(GUIDED, armed=False)
+    bench.fix()
+    d = bench.tick()
+    assert d.state is S.WAITING and d.reason == "arming" and Arm() in d.requests and d.velocity_ned == (0.0, 0.0)
+    bench.heartbeat(GUIDED, armed=True)
+    d = bench.tick()
+    assert d.state is S.GUIDING and math.hypot(*d.velocity_ned) > 0.05 and "following the field" in d.reason
+    assert not d.degraded and d.yaw_rad is None  # moving: velocity only (3559)
+    assert [s for _, s in bench.sup.transitions] == ["waiting", "guiding"]
+
+
+def test_stale_position_holds_at_the_current_heading_and_resumes(zshape_model: Path) -> None:
+    for zero_with_yaw in (True, False):
+        bench = Bench(zshape_model, failsafe={"zero_with_yaw": zero_with_yaw})
+        bench.fly(1.0)
+        heading = bench.reported_heading
+        bench.advance(0.6)  # positions stop for longer than stale_after_s
+        bench.heartbeat()
+        d = bench.tick()
+        assert d.state is S.HOLD and d.reason.startswith("no fresh position") and d.velocity_ned == (0.0, 0.0)
+        # speed 0 at the current heading (type mask 2535), not velocity-only zero, which Rover reads as "north"
+        assert d.yaw_rad == (pytest.approx(heading) if zero_with_yaw else None)
+        assert bench.sup.zero_setpoint() == ((0.0, 0.0), heading if zero_with_yaw else None)
+        assert bench.fly(0.2)[-1].state is S.GUIDING
+
+
+def test_arrives_then_drifts_off_reacquires_and_the_state_is_never_arrived_beyond_the_radius(bench: Bench) -> None:
+    bench.p = np.array([0.4, 0.1])
+    decisions = bench.fly(40.0)
+    assert decisions[-1].state is S.ARRIVED and "keeping station" in decisions[-1].reason
+    reacquire = bench.cfg.arrival.reacquire_radius_m
+    # the boat stops obeying and a 0.05 m/s current carries it off: each fix shows the drift at once
+    drifted = []
+    for _ in range(200):
+        bench.p = bench.p + np.array([0.0, 0.05]) * DT
+        bench.advance()
+        bench.fix(v=np.array([0.0, 0.05]))
+        distance = math.hypot(*bench.p)
+        assert not (bench.sup.state is S.ARRIVED and distance > reacquire + 1e-6), distance
+        drifted.append(bench.sup.state)
+        if bench.sup.state is S.GUIDING:
+            break
+    assert bench.sup.state is S.GUIDING and bench.sup.reason.startswith("drifted")
+    assert f"beyond reacquire_radius_m {reacquire:g}" in bench.sup.reason
+    assert any("drifted" in n.text for n in bench.sup.take_notes())
+    decisions = bench.fly(40.0)  # obeying again: back to the goal
+    assert decisions[-1].state is S.ARRIVED and math.hypot(*bench.p) <= bench.cfg.arrival.radius_m
+    assert [s for _, s in bench.sup.transitions][-3:] == ["arrived", "guiding", "arrived"]
+
+
+def test_station_keeping_with_integral_action_holds_a_boat_unlike_the_model(zshape_model: Path) -> None:
+    """A boat that makes good half of its setpoint through the water, in 0.05 m/s toward the east, with no
+    current compensation: proportional feedback alone settles where kp e / 2 = |c|, 0.2 m off; the
+    integral of the error beyond the arrival radius brings it back inside it."""
+    holds = {}
+    for ki in (0.0, 0.1):
+        bench = Bench(zshape_model, arrival={"integral_gain_per_s2": ki}, command={"current_compensation": False})
+        bench.p = np.array([0.1, 0.0])
+        bench.fly(40.0, current=(0.0, 0.05), response=0.5)
+        distances = []
+        for d in bench.fly(60.0, current=(0.0, 0.05), response=0.5):
+            distances.append(math.hypot(*bench.p))
+            assert d.state is S.ARRIVED
+            assert math.hypot(*d.velocity_ned) <= bench.cfg.command.max_speed_mps + 1e-12
+        holds[ki] = max(distances[-200:])  # the last 10 s
+        integral = bench.sup.station.integral
+        assert math.hypot(*integral) <= bench.cfg.arrival.integral_limit_mps + 1e-12  # anti-windup clamp
+    assert holds[0.0] == pytest.approx(0.05 / (0.5 * 0.5), rel=0.1)
+    assert holds[0.1] <= bench.cfg.arrival.radius_m + 0.01
+
+
+def test_a_stalled_boat_triggers_the_progress_watchdog_and_direct_pursuit(bench: Bench) -> None:
+    stall_s = bench.cfg.failsafe.stall_s
+    decisions = bench.fly(stall_s - 1.0, obey=False)
+    assert all(d.state is S.GUIDING and not d.degraded for d in decisions)
+    decisions = bench.fly(2.0, obey=False)
+    d = decisions[-1]
+    assert d.state is S.GUIDING and d.degraded and d.reason.startswith("direct pursuit of the goal")
+    to_goal = -bench.p / math.hypot(*bench.p)
+    v = np.array(d.velocity_ned)
+    assert float(v @ to_goal) / math.hypot(*v) > 0.99  # straight for the goal
+    assert any("no progress along the field" in n.text for n in bench.sup.take_notes())
+    decisions = bench.fly(60.0)  # obeying now: pursuit brings it in, and arrival clears degraded
+    assert decisions[-1].state is S.ARRIVED and not decisions[-1].degraded
+
+
+def test_teleporting_positions_hold_and_are_never_followed_to_arrival(bench: Bench) -> None:
+    bench.fly(2.0)
+    real = bench.p.copy()
+    for k in range(50):  # 0.5 s of fake fixes at the goal at 100 Hz, between the real ones at 20 Hz
+        bench.advance(0.01)
+        if k % 5 == 0:
+            bench.fix(p=real)
+        else:
+            assert not bench.fix(p=np.zeros(2), v=np.zeros(2))
+        if k % 10 == 5:
+            d = bench.tick()
+            assert d.state is S.HOLD and "farther than the vehicle can move" in d.reason
+            assert d.velocity_ned == (0.0, 0.0)
+    assert not bench.sup.arrived and bench.sup.vehicle.gate.counts["teleport"] == 40
+    p, _ = bench.sup.vehicle.estimate(bench.t)
+    assert math.hypot(*(p - real)) < 0.1
+    bench.p = real
+    decisions = bench.fly(1.5)
+    assert decisions[-1].state is S.GUIDING  # teleport_hold_s after the last fake
+
+
+def test_a_jump_that_stays_is_accepted_after_teleport_confirm_s(bench: Bench) -> None:
+    bench.fly(1.0)
+    # e.g. the vehicle's EKF moved its origin: farther than max_speed_mps (2) x teleport_confirm_s (1) + 0.3 m
+    bench.p = bench.p + np.array([3.0, 0.0])
+    decisions = bench.fly(0.8, obey=False)
+    assert decisions[-1].state is S.HOLD
+    decisions = bench.fly(1.5)
+    assert decisions[-1].state is S.GUIDING
+    p, _ = bench.sup.vehicle.estimate(bench.t)
+    assert math.hypot(*(p - bench.p)) < 0.1
+    assert any("stayed" in n.text for n in bench.sup.take_notes())
+
+
+def test_out_of_bounds_inputs_are_rejected_counted_and_logged_once_a_second(bench: Bench) -> None:
+    bench.fly(1.0)
+    before = bench.sup.vehicle.estimate(bench.t)[0]
+    bench.sup.take_notes()
+    for k in range(200):  # 2 s at 100 Hz: NaN and 1e30 velocities, a heading of 1e9
+        bench.advance(0.01)
+        assert not bench.fix(v=np.array([1e30, 0.0]))
+        assert not bench.fix(p=np.array([math.nan, 0.0]))
+        bench.sup.handle(Attitude(bench.wall, bench.t, 1e9, 0.0))
+        if k % 10 == 0:
+            bench.fix()
+    counts = bench.sup.vehicle.gate.counts
+    assert counts["velocity"] == 200 and counts["non-finite"] == 200 and counts["heading"] == 200
+    lines = [n.text for n in bench.sup.take_notes() if n.text.startswith("rejected")]
+    for kind in ("velocity", "non-finite", "heading"):
+        assert 2 <= sum(line.startswith(f"rejected {kind}:") for line in lines) <= 3  # once per second
+    assert any("more since the last line" in line for line in lines)
+    p, v = bench.sup.vehicle.estimate(bench.t)
+    assert math.hypot(*(p - before)) < 0.5 and math.hypot(*v) <= bench.cfg.limits.max_speed_mps
+    assert bench.sup.vehicle.heading_rad == pytest.approx(bench.reported_heading)
+    bench.sup.handle(InputRejected(bench.wall, "timestamp", "LOCAL_POSITION_NED time_boot_ms 4000000000"))
+    assert counts["timestamp"] == 1
+
+
+def test_the_current_estimate_is_reset_when_it_leaves_its_bounds(bench: Bench) -> None:
+    bench.fly(1.0)
+    limit = bench.cfg.limits.max_current_mps
+    for _ in range(400):  # heading north while sliding east at 1.5 m/s: "a 1.5 m/s current"
+        bench.advance()
+        bench.p = bench.p + np.array([0.0, 1.5]) * DT
+        bench.fix(v=np.array([0.0, 1.5]))
+        bench.sup.handle(Attitude(bench.wall, bench.t, 0.0, 0.0))
+        bench.sup.update_current(bench.t)
+        assert math.hypot(*bench.sup.vehicle.current.current_ned) <= limit
+    assert any("current estimate" in n.text and "reset" in n.text for n in bench.sup.take_notes())
+
+
+def test_a_vehicle_reboot_resets_the_estimates_and_requests_streams_and_guided_again(bench: Bench) -> None:
+    bench.fly(2.0)
+    bench.sup.handle(ClockRestart(bench.wall, 0.2, bench.t, rebooted=True))
+    assert bench.sup.vehicle.fix_t is None and bench.sup.vehicle.tracker.t is None
+    bench.heartbeat(MANUAL, armed=False)  # a rebooted Rover comes up in its initial mode
+    bench.t = 0.2
+    d = bench.tick()
+    assert d.state is S.WAITING and MessageInterval(32, 20.0) in d.requests
+    bench.fix()
+    d = bench.tick()
+    assert SetMode(GUIDED) in d.requests  # not "the pilot left GUIDED": it rebooted
+    assert any("went back (a reboot)" in n.text for n in bench.sup.take_notes())
+
+
+def test_a_heartbeat_gap_requests_the_streams_again(bench: Bench) -> None:
+    bench.fly(3.0)
+    assert not any(isinstance(r, MessageInterval) for r in bench.fly(1.0)[-1].requests)
+    bench.advance(bench.cfg.failsafe.heartbeat_gap_s + 0.1)
+    bench.heartbeat()
+    bench.fix()
+    assert MessageInterval(32, 20.0) in bench.tick().requests
+
+
+def test_no_setpoint_out_for_two_periods_is_a_fault_with_zero_velocity_until_setpoints_flow(bench: Bench) -> None:
+    bench.fly(1.0)
+    assert bench.sup.check_output(Tick(bench.wall, bench.t)) is None
+    bench.advance(2.5 / bench.cfg.command.rate_hz)
+    d = bench.sup.check_output(Tick(bench.wall, bench.t))
+    assert d.state is S.FAULT and d.reason.startswith("no setpoint sent for") and d.velocity_ned == (0.0, 0.0)
+    bench.fix()
+    assert bench.tick().state is S.FAULT  # until one goes out
+    bench.sup.setpoint_sent(bench.t)
+    assert bench.tick().state is S.GUIDING
+
+
+def test_the_pilot_taking_over_is_respected_but_a_loiter_hand_over_is_taken_back_on_drift(zshape_model) -> None:
+    bench = Bench(zshape_model, arrival={"on_arrival": "loiter", "settle_timeout_s": 0.0})
+    bench.p = np.array([0.1, 0.0])
+    bench.fly(1.0)
+    d = bench.tick()
+    assert (d.state is S.ARRIVED and SetMode(LOITER) in d.requests) or bench.sup.settled
+    bench.heartbeat(LOITER)
+    for _ in range(300):  # LOITER lets it drift (inside LOIT_RADIUS)
+        bench.advance()
+        bench.p = bench.p + np.array([0.05, 0.0]) * DT
+        bench.fix(v=np.array([0.05, 0.0]))
+        if bench.sup.state is S.GUIDING:
+            break
+    assert bench.sup.state is S.GUIDING and not bench.sup.settled
+    bench.heartbeat(LOITER)
+    d = bench.tick()
+    assert SetMode(GUIDED) in d.requests
+    bench.heartbeat(GUIDED)
+    bench.heartbeat(MANUAL)  # now the pilot takes it: left alone
+    bench.advance(1.1)
+    bench.fix()
+    d = bench.tick()
+    assert d.state is S.WAITING and "not taking it back" in d.reason and d.velocity_ned is None
+
+
+def test_a_geodetic_goal_is_placed_by_events_not_written_from_outside(zshape_model: Path) -> None:
+    bench = Bench(zshape_model, frame={"goal_latlon": [47.0, 8.0]})
+    bench.heartbeat()
+    bench.fix()
+    assert bench.tick().reason == "waiting for GLOBAL_POSITION_INT to place the goal"
+    bench.sup.handle(GlobalFix(bench.wall, bench.t, 47.0 - 1e-5, 8.0))  # the boat ~1.11 m south of the goal
+    goal = bench.sup.law.goal_ned
+    assert goal[0] == pytest.approx(1.5 + 1.11, abs=0.01) and goal[1] == pytest.approx(-1.5, abs=0.01)
+    assert bench.sup.goal_placed and bench.tick().state is S.GUIDING
+    assert any(n.level == logging.INFO and "geodetic goal" in n.text for n in bench.sup.take_notes())
