@@ -27,13 +27,13 @@ import numpy as np
 
 from koopguide.base import config as config_io
 from koopguide.guidance import events as ev
-from koopguide.guidance import vehicle
 from koopguide.guidance.estimation.clock import VehicleClock
 from koopguide.guidance.law.command import GuidanceLaw, GuidanceState
 from koopguide.guidance.link import open_link
 from koopguide.guidance.settings import ExitMode, GuidanceConfig
 from koopguide.guidance.supervisor import Supervisor
 from koopguide.guidance.vehicle_events import VehicleEvents
+from koopguide.mavlink import rover
 from koopguide.mavlink.link import Link
 from koopguide.model.field import load_field
 
@@ -181,22 +181,22 @@ class GuidanceDaemon:
     async def _shutdown(self) -> None:
         """Zero velocity (at the current heading), then the exit mode (only if still in GUIDED)."""
         sup = self.supervisor
-        self.mode_before_exit = vehicle.mode_name(sup.mode)
+        self.mode_before_exit = rover.mode_name(sup.mode)
         sent = self._send_zero()
-        if sup.mode != vehicle.GUIDED or not sup.link_up(time.monotonic()):
+        if sup.mode != rover.GUIDED or not sup.link_up(time.monotonic()):
             log.info(
                 "shutdown: %s; vehicle mode %s left as it is",
                 "zero velocity sent" if sent else "link down, nothing sent",
-                vehicle.mode_name(sup.mode),
+                rover.mode_name(sup.mode),
             )
             return
-        mode = vehicle.LOITER if self.cfg.failsafe.on_exit is ExitMode.LOITER else vehicle.HOLD
+        mode = rover.LOITER if self.cfg.failsafe.on_exit is ExitMode.LOITER else rover.HOLD
         deadline = time.monotonic() + SHUTDOWN_WAIT_S
         while time.monotonic() < deadline and sup.mode != mode:
             self._send_zero()
-            self._send(vehicle.set_mode(self.target, mode))
+            self._send(rover.set_mode(self.target, mode))
             await asyncio.sleep(0.1)
-        log.info("shutdown: zero velocity sent; vehicle mode %s", vehicle.mode_name(sup.mode))
+        log.info("shutdown: zero velocity sent; vehicle mode %s", rover.mode_name(sup.mode))
 
     # ------------------------------------------------------------------------------ inbound
     def _on_message(self, msg: Any, arrived: float) -> None:
@@ -244,10 +244,10 @@ class GuidanceDaemon:
 
     def _request_message(self, request: ev.Request) -> Any:
         if isinstance(request, ev.SetMode):
-            return vehicle.set_mode(self.target, request.mode)
+            return rover.set_mode(self.target, request.mode)
         if isinstance(request, ev.Arm):
-            return vehicle.arm(self.target)
-        return vehicle.message_interval(self.target, request.message_id, request.rate_hz)
+            return rover.arm(self.target)
+        return rover.message_interval(self.target, request.message_id, request.rate_hz)
 
     def _log_notes(self) -> None:
         for note in self.events.take_notes() + self.supervisor.take_notes():
@@ -265,7 +265,7 @@ class GuidanceDaemon:
         if not np.all(np.isfinite(v)):  # the last line of defence: never put a NaN on the wire
             v = np.zeros(2)
         ms = int((time.monotonic() - self._boot) * 1000)
-        if self._send(vehicle.velocity_setpoint(self.target, ms, v, yaw)):
+        if self._send(rover.velocity_setpoint(self.target, ms, v, yaw)):
             self.last_cmd = v.copy()
             self.setpoints_sent += 1
             self.max_cmd_speed = max(self.max_cmd_speed, float(np.hypot(*v)))
@@ -293,7 +293,7 @@ class GuidanceDaemon:
     async def _heartbeat_loop(self) -> None:
         period = 1.0 / self.cfg.mavlink.heartbeat_hz
         while True:
-            self._send(vehicle.heartbeat())
+            self._send(rover.heartbeat())
             await asyncio.sleep(period)
 
     async def _status_loop(self) -> None:
@@ -326,7 +326,7 @@ class GuidanceDaemon:
             "state": sup.state.value,
             "reason": sup.reason,
             "degraded": self.degraded,
-            "mode": vehicle.mode_name(sup.mode),
+            "mode": rover.mode_name(sup.mode),
             "armed": sup.armed,
             "position_ned": position,
             "velocity_ned": velocity,

@@ -10,8 +10,8 @@ from __future__ import annotations
 import math
 
 from koopguide.guidance import events as ev
-from koopguide.guidance import vehicle as rover
 from koopguide.guidance.settings import GuidanceConfig
+from koopguide.mavlink import rover
 
 ATTITUDE_RATE_HZ = 10.0  # requested ATTITUDE rate (turn slowdown, current estimate, zero-velocity yaw) at most
 FRESH_STREAM_S = 2.0  # positions younger than this (vehicle s): the streams are flowing, no need to ask again

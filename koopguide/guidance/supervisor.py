@@ -22,13 +22,13 @@ import math
 import numpy as np
 
 from koopguide.guidance import events as ev
-from koopguide.guidance import vehicle as rover
 from koopguide.guidance.estimation.progress import ProgressWatchdog
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceLaw, GuidanceState, along_current
 from koopguide.guidance.law.station import StationKeeper
 from koopguide.guidance.requests import RequestSchedule
 from koopguide.guidance.settings import ArrivalAction, GuidanceConfig
 from koopguide.guidance.vehicle_state import VehicleState
+from koopguide.mavlink import rover
 
 OUTPUT_GAP_PERIODS = 2.0  # no setpoint for this many command periods while guiding/arrived: fault
 ZERO = (0.0, 0.0)

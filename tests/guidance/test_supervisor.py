@@ -30,12 +30,12 @@ from koopguide.guidance.events import (
 )
 from koopguide.guidance.law.command import GuidanceLaw, GuidanceState
 from koopguide.guidance.supervisor import Supervisor
-from koopguide.guidance.vehicle import GUIDED, LOITER, ROVER_MODES
+from koopguide.mavlink.rover import GUIDED, LOITER, MODE_NUMBERS
 from koopguide.model.field import load_field
 
 S = GuidanceState
 DT = 0.05  # fix interval [s]
-MANUAL = ROVER_MODES["MANUAL"]
+MANUAL = MODE_NUMBERS["MANUAL"]
 
 
 class Bench:
