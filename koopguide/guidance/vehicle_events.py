@@ -16,7 +16,7 @@ from typing import Any
 
 from koopguide.guidance import events as ev
 from koopguide.guidance.estimation.clock import REJECTED, RESTARTED, ClockVerdict, VehicleClock
-from koopguide.guidance.link import mavlink
+from koopguide.mavlink.wire import mavlink
 
 ACCEPTED_RESULTS = (mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_IN_PROGRESS)
 

@@ -13,8 +13,8 @@ from koopguide.guidance import events as ev
 from koopguide.guidance.estimation.clock import ClockVerdict, VehicleClock
 from koopguide.guidance.estimation.progress import ProgressWatchdog
 from koopguide.guidance.law.station import LEAK_S, StationKeeper
-from koopguide.guidance.link import mavlink
 from koopguide.guidance.vehicle_events import VehicleEvents
+from koopguide.mavlink.wire import mavlink
 
 
 def running_clock(seconds: float = 5.0) -> tuple[VehicleClock, list[float]]:
