@@ -71,6 +71,7 @@ def test_a_range_is_closed_or_open_as_declared():
     r = config.Range(0.0, 1.0, lo_open=True)
     assert not r.contains(0.0) and r.contains(1.0) and r.contains(0.5)
     assert not r.contains(math.nan) and not config.FINITE.contains(math.inf)
+    assert not config.FINITE.contains(10**400)  # no OverflowError: simply out of range
     assert str(r) == "a number in (0, 1]" and str(config.POSITIVE) == "a finite number > 0"
 
 
