@@ -31,7 +31,7 @@ from koopguide.harness.mission import demo_start_pose, free_udp_port
 from koopguide.model.field import load_field
 from koopguide.model.learn import trainer
 from koopguide.model.learn.export import save
-from tests.learn.conftest import small_config
+from tests.support.models import small_config
 
 REPO = Path(__file__).resolve().parents[2]
 KOOPGUIDE = [sys.executable, "-m", "koopguide"]

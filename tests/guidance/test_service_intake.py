@@ -22,8 +22,8 @@ import pytest
 
 from koopguide.guidance.daemon import GuidanceDaemon
 from koopguide.harness.mission import free_udp_port
+from tests.support.scripted_vehicle import GUIDED, ScriptedVehicle
 
-from .scripted_vehicle import GUIDED, ScriptedVehicle
 from .test_service_failsafes import config, speed, until
 
 

@@ -88,7 +88,7 @@ def test_spectral_projection_caps_rho_and_leaves_inner_eigenvalues_alone():
 
 
 def test_training_is_deterministic_for_a_seed_and_differs_across_seeds(zshape):
-    from tests.learn.conftest import small_config
+    from tests.support.models import small_config
 
     cfg = small_config(optim={"steps": 60})
     a = trainer.train(zshape, cfg, seed=5)
@@ -100,7 +100,7 @@ def test_training_is_deterministic_for_a_seed_and_differs_across_seeds(zshape):
 
 
 def test_invalid_training_settings_are_refused_with_the_values():
-    from tests.learn.conftest import small_config
+    from tests.support.models import small_config
 
     with pytest.raises(ValueError, match=r"max_spectral_radius must be in \(0, 1\), got 1.5"):
         trainer.train(None, small_config(stability={"max_spectral_radius": 1.5}), seed=0)
@@ -115,7 +115,7 @@ def test_xavier_bounds_as_reference():
 
 
 def test_multistep_training_path_runs_and_reports_its_term(zshape):
-    from tests.learn.conftest import small_config
+    from tests.support.models import small_config
 
     cfg = small_config(model={"nu": 64, "rank": 8}, optim={"steps": 20}, loss={"horizon": 4, "multistep": 0.5})
     seen = []

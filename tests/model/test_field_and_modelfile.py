@@ -12,7 +12,7 @@ from koopguide import ModelFileError
 from koopguide.base import modelfile
 from koopguide.model.learn.export import save
 from koopguide.model.learn.model import FourierKoopman
-from tests.learn.conftest import small_config
+from tests.support.models import small_config
 
 
 @pytest.fixture(scope="module")
