@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import collections
 import io
+import math
 import pickle
 import zipfile
 from pathlib import Path
@@ -70,8 +71,17 @@ def read(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
             payload = _Unpickler(io.BytesIO(archive.read(pkl[0])), archive, prefix).load()
         except ModelFileError as exc:
             raise ModelFileError(f"{path}: {exc}") from None
-        except (pickle.UnpicklingError, EOFError, KeyError, ValueError, TypeError, zipfile.BadZipFile,
-                AttributeError, IndexError, OSError) as exc:
+        except (
+            pickle.UnpicklingError,
+            EOFError,
+            KeyError,
+            ValueError,
+            TypeError,
+            zipfile.BadZipFile,
+            AttributeError,
+            IndexError,
+            OSError,
+        ) as exc:
             raise ModelFileError(f"{path}: corrupt or truncated model file ({type(exc).__name__}: {exc})") from None
     return _validate(path, payload)
 
@@ -96,6 +106,11 @@ def _validate(path: Path, payload: Any) -> tuple[dict[str, np.ndarray], dict[str
     if missing:
         raise ModelFileError(f"{path}: missing entries {missing}")
     d, nu, r = meta["dim"], meta["nu"], meta["rank"]
+    for name, value, top in (("dim", d, 16), ("nu", nu, 1 << 16), ("rank", r, 1 << 12)):
+        if not _is_count(value) or not 1 <= value <= top:
+            raise ModelFileError(f"{path}: {name} must be an integer in [1, {top}], got {value!r}")
+    if d < 2:
+        raise ModelFileError(f"{path}: dim must be >= 2, got {d}")
     want = {"W": (nu, d), "b": (nu,), "A": (nu + d, r), "B": (nu + d, r)}
     for name, shape in want.items():
         arr = weights[name]
@@ -104,13 +119,35 @@ def _validate(path: Path, payload: Any) -> tuple[dict[str, np.ndarray], dict[str
             raise ModelFileError(
                 f"{path}: weight {name} has shape {seen}, expected {shape} for dim={d} nu={nu} rank={r}"
             )
+        if arr.dtype.kind != "f":
+            raise ModelFileError(f"{path}: weight {name} has dtype {arr.dtype}, expected floating point")
         if not np.all(np.isfinite(arr)):
             raise ModelFileError(f"{path}: weight {name} holds non-finite values")
-    if len(meta["goal"]) != d:
-        raise ModelFileError(f"{path}: goal has {len(meta['goal'])} coordinates, expected dim={d}")
-    if not isinstance(meta["substeps"], int) or meta["substeps"] < 1:
-        raise ModelFileError(f"{path}: substeps must be a positive integer, got {meta['substeps']!r}")
+    meta["goal"] = _finite_vector(path, "goal", meta["goal"], d)
+    if "bounds_lo" in meta or "bounds_hi" in meta:
+        lo = _finite_vector(path, "bounds_lo", meta.get("bounds_lo"), d)
+        hi = _finite_vector(path, "bounds_hi", meta.get("bounds_hi"), d)
+        if not np.all(np.asarray(lo) < np.asarray(hi)):
+            raise ModelFileError(f"{path}: bounds must satisfy lo < hi in every coordinate, got lo={lo} hi={hi}")
+        meta["bounds_lo"], meta["bounds_hi"] = lo, hi
+    if not _is_count(meta["substeps"]) or not 1 <= meta["substeps"] <= 1_000_000:
+        raise ModelFileError(f"{path}: substeps must be an integer in [1, 1000000], got {meta['substeps']!r}")
+    if not isinstance(meta["goal_centred"], bool):
+        raise ModelFileError(f"{path}: goal_centred must be true or false, got {meta['goal_centred']!r}")
     return weights, meta
+
+
+def _finite_vector(path: Path, name: str, value: Any, dim: int) -> list[float]:
+    """``value`` as ``dim`` finite floats (a list), or a ModelFileError naming the entry and values seen."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ModelFileError(f"{path}: {name} is not a list of numbers: {value!r}") from None
+    if arr.shape != (dim,):
+        raise ModelFileError(f"{path}: {name} has shape {arr.shape}, expected ({dim},)")
+    if not np.all(np.isfinite(arr)):
+        raise ModelFileError(f"{path}: {name} holds non-finite values {arr.tolist()}")
+    return arr.tolist()
 
 
 _DTYPES = {
@@ -125,20 +162,52 @@ class _StorageType:
         self.dtype = np.dtype(dtype)
 
 
-def _rebuild_tensor(storage: np.ndarray, offset: int, size: tuple, stride: tuple, *_: Any) -> np.ndarray:
-    """Mirror of torch._utils._rebuild_tensor_v2 for a flat numpy storage."""
-    if not size:
-        return storage[offset : offset + 1].reshape(()).copy()
-    itemsize = storage.dtype.itemsize
-    span = offset + sum((n - 1) * s for n, s in zip(size, stride, strict=True)) + 1
-    if any(n == 0 for n in size):
+#: Largest tensor the loader builds (elements); koopguide's own weights are far below it.
+MAX_TENSOR_ELEMENTS = 1 << 26
+#: Largest archive entry the loader reads (bytes).
+MAX_ENTRY_BYTES = 1 << 30
+
+
+def _rebuild_tensor(storage: np.ndarray, offset: Any, size: Any, stride: Any, *_: Any) -> np.ndarray:
+    """Mirror of torch._utils._rebuild_tensor_v2 for a flat numpy storage.
+
+    Shape, stride and offset are checked before any array is built: non-negative integers, a dense
+    or strictly positive layout (no stride 0, no negative stride), at most ``MAX_TENSOR_ELEMENTS``
+    elements and no element outside the storage.
+    """
+    if not isinstance(size, tuple) or not isinstance(stride, tuple) or len(size) != len(stride):
+        raise ModelFileError(f"tensor with malformed size {size!r} / stride {stride!r}")
+    if not all(_is_count(v) for v in (offset, *size, *stride)):
+        raise ModelFileError(f"tensor with invalid offset {offset!r}, size {size!r} or stride {stride!r}")
+    numel = math.prod(size)
+    if numel > MAX_TENSOR_ELEMENTS or numel > storage.size:
+        raise ModelFileError(
+            f"tensor of size {size} ({numel} elements) exceeds its storage of {storage.size} "
+            f"elements or the limit of {MAX_TENSOR_ELEMENTS}"
+        )
+    if numel == 0:
         return np.zeros(size, dtype=storage.dtype)
-    if offset < 0 or span > storage.size:
-        raise ModelFileError(f"tensor of size {size} overruns its storage of {storage.size} elements")
+    if any(s == 0 for n, s in zip(size, stride, strict=True) if n > 1):
+        raise ModelFileError(f"tensor of size {size} has a zero stride {stride} (expanded tensors are not allowed)")
+    if not size:
+        if offset >= storage.size:
+            raise ModelFileError(f"scalar tensor at offset {offset} overruns its storage of {storage.size} elements")
+        return storage[offset : offset + 1].reshape(()).copy()
+    span = offset + sum((n - 1) * s for n, s in zip(size, stride, strict=True)) + 1
+    if span > storage.size:
+        raise ModelFileError(
+            f"tensor of size {size} and stride {stride} overruns its storage of {storage.size} elements"
+        )
+    itemsize = storage.dtype.itemsize
     view = np.lib.stride_tricks.as_strided(
         storage[offset:], shape=size, strides=tuple(s * itemsize for s in stride), writeable=False
     )
     return np.array(view)
+
+
+def _is_count(value: Any) -> bool:
+    """A non-negative Python integer (not a bool)."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
 
 
 class _Unpickler(pickle.Unpickler):
@@ -163,8 +232,14 @@ class _Unpickler(pickle.Unpickler):
         _, storage_type, key, _location, numel = pid
         if not isinstance(storage_type, _StorageType):
             raise ModelFileError(f"unsupported storage type {storage_type!r}")
-        raw = self.archive.read(f"{self.prefix}data/{key}")
+        if not isinstance(key, str) or not _is_count(numel):
+            raise ModelFileError(f"malformed storage reference {pid!r}")
         dtype = storage_type.dtype.newbyteorder("<")
+        entry = f"{self.prefix}data/{key}"
+        size = self.archive.getinfo(entry).file_size
+        if size > MAX_ENTRY_BYTES or numel * dtype.itemsize > MAX_ENTRY_BYTES:
+            raise ModelFileError(f"tensor storage {key} of {size} bytes exceeds the limit of {MAX_ENTRY_BYTES}")
+        raw = self.archive.read(entry)
         if len(raw) != numel * dtype.itemsize:
             raise ModelFileError(f"tensor storage {key} holds {len(raw)} bytes, expected {numel * dtype.itemsize}")
         return np.frombuffer(raw, dtype=dtype)

@@ -85,8 +85,10 @@ def test_eigenvalues_are_the_full_spectrum_of_K(saved):
 
 
 def test_query_side_does_not_import_torch(saved):
-    code = ("import sys, koopguide; f = koopguide.load_field(sys.argv[1]); f.velocity(f.goal + 1); "
-            "print('torch' in sys.modules)")
+    code = (
+        "import sys, koopguide; f = koopguide.load_field(sys.argv[1]); f.velocity(f.goal + 1); "
+        "print('torch' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code, str(saved)], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 
@@ -109,8 +111,15 @@ def test_corrupt_truncated_wrong_kind_and_newer_files_are_refused(tmp_path, save
 
     weights, meta = modelfile.read(saved)
     newer = tmp_path / "newer.pt"
-    torch.save({"format": "koopguide-field", "format_version": 99,
-                "weights": {k: torch.as_tensor(v) for k, v in weights.items()}, "meta": meta}, newer)
+    torch.save(
+        {
+            "format": "koopguide-field",
+            "format_version": 99,
+            "weights": {k: torch.as_tensor(v) for k, v in weights.items()},
+            "meta": meta,
+        },
+        newer,
+    )
     with pytest.raises(ModelFileError, match="format version 99 is newer"):
         koopguide.load_field(newer)
 
@@ -133,4 +142,90 @@ def test_arbitrary_pickled_objects_are_refused_not_executed(tmp_path):
     with zipfile.ZipFile(path, "w") as zf:
         zf.writestr("evil/data.pkl", pickle.dumps({"format": "koopguide-field", "x": _Evil()}))
     with pytest.raises(ModelFileError, match=r"refusing to load builtins\.print"):
+        koopguide.load_field(path)
+
+
+class _RawTensor:
+    """Pickles as torch's tensor rebuild call with any offset, size and stride (as a hostile file could)."""
+
+    def __init__(self, numel: int, size: tuple, stride: tuple, offset: int = 0) -> None:
+        self.storage = torch.arange(float(numel), dtype=torch.float64).untyped_storage()
+        self.size, self.stride, self.offset = size, stride, offset
+
+    def __reduce__(self):
+        import collections
+
+        typed = torch.storage.TypedStorage(wrap_storage=self.storage, dtype=torch.float64, _internal=True)
+        return (
+            torch._utils._rebuild_tensor_v2,
+            (typed, self.offset, self.size, self.stride, False, collections.OrderedDict()),
+        )
+
+
+def _with_weight(tmp_path, saved, name: str, tensor) -> object:
+    weights, meta = modelfile.read(saved)
+    payload = {
+        "format": "koopguide-field",
+        "format_version": 1,
+        "weights": {k: torch.as_tensor(v) for k, v in weights.items()},
+        "meta": meta,
+    }
+    payload["weights"][name] = tensor
+    path = tmp_path / f"hostile_{name}.pt"
+    torch.save(payload, path)
+    return path
+
+
+def test_negative_stride_tensor_is_refused_without_crashing(tmp_path, saved):
+    path = _with_weight(tmp_path, saved, "b", _RawTensor(256, (256,), (-1,), offset=255))
+    code = (
+        "import sys, koopguide\n"
+        "try:\n    koopguide.load_field(sys.argv[1])\n"
+        "except koopguide.ModelFileError as e:\n    print(e)"
+    )
+    out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr  # a segfault would be -11
+    assert "invalid offset 255, size (256,) or stride (-1,)" in out.stdout
+
+
+def test_huge_stride_zero_tensor_is_refused_before_allocating(tmp_path, saved):
+    path = _with_weight(tmp_path, saved, "W", _RawTensor(4, (1_000_000, 1_000_000), (0, 0)))
+    with pytest.raises(ModelFileError, match=r"size \(1000000, 1000000\) \(1000000000000 elements\) exceeds"):
+        koopguide.load_field(path)
+    expanded = _with_weight(tmp_path, saved, "b", _RawTensor(256, (256,), (0,)))
+    with pytest.raises(ModelFileError, match=r"zero stride \(0,\)"):
+        koopguide.load_field(expanded)
+
+
+@pytest.mark.parametrize(
+    ("entry", "value", "message"),
+    [
+        ("goal", [float("nan"), 0.0], r"goal holds non-finite values \[nan, 0.0\]"),
+        ("bounds_lo", [-40.0, float("inf")], r"bounds_lo holds non-finite values \[-40.0, inf\]"),
+        ("bounds_hi", [float("nan"), 3.0], r"bounds_hi holds non-finite values"),
+        ("bounds_hi", None, r"bounds_hi has shape \(\), expected \(2,\)"),
+        ("goal", [0.0, 0.0, 0.0], r"goal has shape \(3,\), expected \(2,\)"),
+        ("substeps", 0, r"substeps must be an integer in \[1, 1000000\], got 0"),
+        ("nu", -3, r"nu must be an integer in \[1, 65536\], got -3"),
+    ],
+)
+def test_non_finite_or_inconsistent_metadata_is_refused(tmp_path, saved, entry, value, message):
+    weights, meta = modelfile.read(saved)
+    path = tmp_path / "bad_meta.pt"
+    modelfile.write(path, weights, {**meta, entry: value})
+    with pytest.raises(ModelFileError, match=message):
+        koopguide.load_field(path)
+
+
+def test_a_domain_with_lo_equal_to_hi_is_refused(tmp_path, saved):
+    weights, meta = modelfile.read(saved)
+    path = tmp_path / "flat.pt"
+    modelfile.write(path, weights, {**meta, "bounds_lo": [-5.0, 2.0], "bounds_hi": [30.0, 2.0]})
+    with pytest.raises(ModelFileError, match=r"lo < hi in every coordinate, got lo=\[-5.0, 2.0\] hi=\[30.0, 2.0\]"):
+        koopguide.load_field(path)
+
+
+def test_non_float_weights_are_refused(tmp_path, saved):
+    path = _with_weight(tmp_path, saved, "b", torch.zeros(256, dtype=torch.int64))
+    with pytest.raises(ModelFileError, match="weight b has dtype int64, expected floating point"):
         koopguide.load_field(path)
