@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -25,6 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=Path, help="YAML overriding config/train.yaml")
     p.add_argument("--seed", type=int, default=0, help="random seed (training is deterministic per seed)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--allow-uncertified", action="store_true",
+                   help="write the model even if it fails its convergence certificate (a loud warning)")
     p.set_defaults(run=cmd_train)
 
     p = sub.add_parser("eval", help="SEA, DTWD, convergence, fixed-point error and spectral radius")
@@ -42,8 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=cmd_plot)
 
     p = sub.add_parser("bench", help="benchmarks that print figures (never timed tests)")
-    p.add_argument("what", choices=["speed", "sitl", "guidance"],
-                   help="speed: training and query speed; sitl: simulator; guidance: service latency and CPU")
+    p.add_argument("what", choices=["speed", "lasa", "sitl", "guidance"],
+                   help="speed: training and query speed; lasa: all LASA shapes, seeds, ablations and a report; "
+                   "sitl: simulator; guidance: service latency and CPU")
     p.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the benchmark")
     p.set_defaults(run=cmd_bench)
 
@@ -75,10 +79,30 @@ def cmd_train(args: argparse.Namespace) -> int:
         log(f"  step {k:5d}/{steps}  " + "  ".join(f"{name} {value:.3e}" for name, value in terms.items()))
 
     trained = trainer.train(demos, cfg, args.seed, progress=progress)
-    save(args.output, trained, demos, cfg)
     info = trained.info
-    log(f"trained in {info['train_seconds']:.1f} s; rho(K) {info['rho']:.3f}; wrote {args.output}")
+    cert = trained.certificate
+    if cert is None or not cert["passed"]:
+        why = ("no certificate was made (convergence: null)" if cert is None else
+               f"the certificate FAILED: {cert['learned']['converged']}/{cert['learned']['starts']} learned-step and "
+               f"{cert['euler']['converged']}/{cert['euler']['starts']} Euler grid starts reached the goal")
+        if not args.allow_uncertified:
+            raise UncertifiedModelError(f"refusing to write {args.output}: {why}; "
+                                        "pass --allow-uncertified to write it anyway")
+        _stderr(f"WARNING: {why}. Writing {args.output} UNCERTIFIED (--allow-uncertified): trajectories may not "
+                "reach the goal, and koopguide run refuses it unless its config allows uncertified models.")
+    save(args.output, trained, demos, cfg)
+    if cert is not None:
+        from koopguide.certificate import summary_lines
+
+        for line in summary_lines(cert):
+            log(line)
+    log(f"fit in {info['fit_seconds']:.2f} s, certified in {info['certify_seconds']:.2f} s; rho(K) {info['rho']:.3f}; "
+        f"wrote {args.output}")
     return 0
+
+
+class UncertifiedModelError(ValueError):
+    """A trained model failed (or skipped) its convergence certificate and was not written."""
 
 
 def save(path: Path, trained, demos: data.Demonstrations, cfg) -> None:
@@ -97,7 +121,14 @@ def save(path: Path, trained, demos: data.Demonstrations, cfg) -> None:
         "train": trained.info,
         "created_unix": time.time(),
     }
-    modelfile.write(path, {"W": trained.W, "b": trained.b, "A": trained.A, "B": trained.B}, meta)
+    weights = {"W": trained.W, "b": trained.b, "A": trained.A, "B": trained.B}
+    if trained.limit is not None:
+        weights["limit_table"] = trained.limit.table
+        meta["limit"] = {"lo": trained.limit.lo.tolist(), "hi": trained.limit.hi.tolist(),
+                         "outside": trained.limit.outside}
+    if trained.certificate is not None:
+        meta["certificate"] = trained.certificate
+    modelfile.write(path, weights, meta)
 
 
 # -------------------------------------------------------------------------------------- eval
@@ -126,6 +157,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.starts < 1:
         raise ValueError(f"--starts must be >= 1, got {args.starts}")
     metrics = evaluate(field, demos, starts=args.starts, seed=args.seed)
+    bad = [k for k, v in metrics.items() if isinstance(v, float) and not math.isfinite(v)]
+    if bad:
+        raise ValueError(f"{args.model}: the field gives non-finite metrics {bad} "
+                         f"({', '.join(f'{k}={metrics[k]}' for k in bad)})")
+    metrics["certificate"] = field.meta.get("certificate")
     metrics["model"] = str(args.model)
     metrics["source"] = demos.source
     if args.json:
@@ -139,8 +175,18 @@ def cmd_eval(args: argparse.Namespace) -> int:
     print(f"converged    {metrics['converged']}/{metrics['starts']} random starts within "
           f"{metrics['convergence_tolerance']:g} of the goal after {metrics['convergence_steps']} learned steps "
           f"(worst {metrics['final_distance_max']:.3g})")
+    print(f"converged    {metrics['converged_euler']}/{metrics['starts']} with Euler steps of velocity/"
+          f"{field.substeps} ({metrics['convergence_steps'] * field.substeps} raw steps; worst "
+          f"{metrics['final_distance_max_euler']:.3g})")
     print(f"goal fixed-point error   {metrics['goal_fixed_point_err']:.3g}")
     print(f"spectral radius of K     {metrics['rho']:.4f}")
+    from koopguide.certificate import certificate_ok, summary_lines
+
+    ok, reason = certificate_ok(field)
+    cert = field.meta.get("certificate")
+    for line in summary_lines(cert) if isinstance(cert, dict) else []:
+        print(line)
+    print(f"certified    {'yes' if ok else 'NO'}: {reason}")
     return 0
 
 
@@ -169,6 +215,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from koopguide.guidance import bench as guidance_bench
 
         return guidance_bench.main(args.rest)
+    if args.what == "lasa":
+        from koopguide.lasa_bench import main as lasa_main
+
+        return lasa_main(args.rest)
     from koopguide.bench import main as bench_main
 
     return bench_main(args.rest)

@@ -8,9 +8,11 @@ with an allow-list (tensors, ordered dicts, nothing else), the same safety as ``
 Layout of the saved dict::
 
     {"format": "koopguide-field", "format_version": 1,
-     "weights": {"W": (nu, d), "b": (nu,), "A": (nu + d, r), "B": (nu + d, r)},   # float64 tensors
+     "weights": {"W": (nu, d), "b": (nu,), "A": (nu + d, r), "B": (nu + d, r),   # float64 tensors
+                 "limit_table": (n_1, ..., n_d)},                                 # optional (version 2)
      "meta": {"dim", "goal", "substeps", "goal_centred", "nu", "rank", "bounds_lo", "bounds_hi",
-              "hyperparameters", "data", "train"}}
+              "hyperparameters", "data", "train",
+              "limit": {"lo", "hi", "outside"}, "certificate": {...}}}                # optional (version 2)
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from typing import Any
 import numpy as np
 
 FORMAT = "koopguide-field"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: optional Lyapunov limit (weights.limit_table, meta.limit) and certificate
 
 
 class ModelFileError(ValueError):
@@ -134,7 +136,30 @@ def _validate(path: Path, payload: Any) -> tuple[dict[str, np.ndarray], dict[str
         raise ModelFileError(f"{path}: substeps must be an integer in [1, 1000000], got {meta['substeps']!r}")
     if not isinstance(meta["goal_centred"], bool):
         raise ModelFileError(f"{path}: goal_centred must be true or false, got {meta['goal_centred']!r}")
+    if "limit_table" in weights or "limit" in meta:
+        _validate_limit(path, weights.get("limit_table"), meta.get("limit"), d)
+    if "certificate" in meta and not isinstance(meta["certificate"], dict):
+        raise ModelFileError(f"{path}: certificate must be a mapping, got {type(meta['certificate']).__name__}")
     return weights, meta
+
+
+def _validate_limit(path: Path, table: Any, spec: Any, d: int) -> None:
+    """The Lyapunov limit: a finite d-D ratio table of 2..4096 nodes per axis over a box with lo < hi."""
+    if not isinstance(table, np.ndarray) or not isinstance(spec, dict):
+        raise ModelFileError(f"{path}: a Lyapunov limit needs both weights.limit_table and meta.limit")
+    if table.ndim != d or min(table.shape) < 2 or max(table.shape) > 4096 or table.dtype.kind != "f":
+        raise ModelFileError(f"{path}: limit_table has shape {table.shape} and dtype {table.dtype}, expected a "
+                             f"{d}-D float grid of 2..4096 nodes per axis")
+    if not np.all(np.isfinite(table)) or np.min(table) < 0:
+        raise ModelFileError(f"{path}: limit_table holds non-finite or negative ratios")
+    lo = _finite_vector(path, "limit.lo", spec.get("lo"), d)
+    hi = _finite_vector(path, "limit.hi", spec.get("hi"), d)
+    if not np.all(np.asarray(lo) < np.asarray(hi)):
+        raise ModelFileError(f"{path}: limit box must satisfy lo < hi in every coordinate, got lo={lo} hi={hi}")
+    outside = spec.get("outside")
+    if isinstance(outside, bool) or not isinstance(outside, int | float) or not 0 < outside < 1:
+        raise ModelFileError(f"{path}: limit.outside must be a number in (0, 1), got {outside!r}")
+    spec["lo"], spec["hi"] = lo, hi
 
 
 def _finite_vector(path: Path, name: str, value: Any, dim: int) -> list[float]:

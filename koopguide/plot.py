@@ -15,13 +15,13 @@ from koopguide.field import FlowField
 
 
 def plot_field(field: FlowField, demos: Demonstrations, output: Path, title: str = "", grid_starts: int = 6) -> None:
-    """Write a PNG: left, the field over the demonstrations' box enlarged 20%; right, eigenvalues of K."""
+    """Write a PNG: left, the field over the demonstrations' box enlarged 10% per side; right, eigenvalues of K."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    lo, hi = convergence_box(demos.bounds, 0.2)
+    lo, hi = convergence_box(demos.bounds, 0.1)
     fig, (ax, ax_eig) = plt.subplots(1, 2, figsize=(13, 6), gridspec_kw={"width_ratios": [1.35, 1]})
 
     gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], 60), np.linspace(lo[1], hi[1], 60))

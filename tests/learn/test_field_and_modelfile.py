@@ -35,7 +35,7 @@ def test_round_trip_and_numpy_field_matches_the_torch_model(saved, small_trained
 
 def test_torch_reads_the_file_with_weights_only(saved):
     payload = torch.load(saved, weights_only=True)
-    assert payload["format"] == "koopguide-field" and payload["format_version"] == 1
+    assert payload["format"] == "koopguide-field" and payload["format_version"] == 2
     weights, meta = modelfile.read(saved)
     for name, arr in weights.items():
         np.testing.assert_array_equal(payload["weights"][name].numpy(), arr)
