@@ -18,6 +18,7 @@ tolerance the start is counted as converged with the bound as its end distance.
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -59,8 +60,9 @@ def ball_profile(field: FlowField) -> tuple[np.ndarray, np.ndarray]:
     return radii, gmax
 
 
-def run_to_goal(field: FlowField, X0: np.ndarray, integrator: str, learned_steps: int, tolerance: float
-                ) -> tuple[np.ndarray, int]:
+def run_to_goal(
+    field: FlowField, X0: np.ndarray, integrator: str, learned_steps: int, tolerance: float
+) -> tuple[np.ndarray, int]:
     """End distances ``(N,)`` (or exact upper bounds) after the integrator's full horizon; steps taken."""
     if integrator == "learned":
         h, n = 1.0, learned_steps
@@ -93,8 +95,9 @@ def run_to_goal(field: FlowField, X0: np.ndarray, integrator: str, learned_steps
 
 
 def outcome(end: np.ndarray, taken: int, tolerance: float) -> IntegratorOutcome:
-    return IntegratorOutcome(converged=int(np.sum(end <= tolerance)), starts=len(end),
-                             worst_end_distance=float(np.max(end)), raw_steps=taken)
+    return IntegratorOutcome(
+        converged=int(np.sum(end <= tolerance)), starts=len(end), worst_end_distance=float(np.max(end)), raw_steps=taken
+    )
 
 
 def field_digest(field: FlowField) -> str:
@@ -108,14 +111,28 @@ def field_digest(field: FlowField) -> str:
     return h.hexdigest()
 
 
-def certify(field: FlowField, lo: np.ndarray, hi: np.ndarray, per_axis: int = 100, tolerance: float = 1.0,
-            learned_steps: int = 100, fixed_point_tolerance: float = 0.01) -> dict:
+def certify(
+    field: FlowField,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    per_axis: int = 100,
+    tolerance: float = 1.0,
+    learned_steps: int = 100,
+    fixed_point_tolerance: float = 0.01,
+) -> dict:
     """Run both integrators from a ``per_axis ** d`` grid over ``[lo, hi]``; the certificate as plain data."""
     return certify_detail(field, lo, hi, per_axis, tolerance, learned_steps, fixed_point_tolerance)[0]
 
 
-def certify_detail(field: FlowField, lo: np.ndarray, hi: np.ndarray, per_axis: int, tolerance: float,
-                   learned_steps: int, fixed_point_tolerance: float) -> tuple[dict, np.ndarray]:
+def certify_detail(
+    field: FlowField,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    per_axis: int,
+    tolerance: float,
+    learned_steps: int,
+    fixed_point_tolerance: float,
+) -> tuple[dict, np.ndarray]:
     """:func:`certify` and the starts ``(M, d)`` that failed either integrator (for repairs)."""
     X0 = grid_starts(lo, hi, per_axis)
     end_l, taken_l = run_to_goal(field, X0, "learned", learned_steps, tolerance)
@@ -125,8 +142,13 @@ def certify_detail(field: FlowField, lo: np.ndarray, hi: np.ndarray, per_axis: i
     speed = np.linalg.norm(field.velocity(X0), axis=1)
     rho = field.spectral_radius()
     fixed = float(np.linalg.norm(field.step(field.goal) - field.goal))
-    passed = (learned.converged == learned.starts and euler.converged == euler.starts and rho < 1.0
-              and fixed <= fixed_point_tolerance and bool(np.all(np.isfinite(speed))))
+    passed = (
+        learned.converged == learned.starts
+        and euler.converged == euler.starts
+        and rho < 1.0
+        and fixed <= fixed_point_tolerance
+        and bool(np.all(np.isfinite(speed)))
+    )
     cert = {
         "version": CERTIFICATE_VERSION,
         "passed": bool(passed),
@@ -157,32 +179,43 @@ def certificate_ok(field: FlowField) -> tuple[bool, str]:
         return False, "the model file carries no convergence certificate (trained before certificates?)"
     if not cert.get("passed"):
         learned, euler = cert.get("learned", {}), cert.get("euler", {})
-        return False, (f"the model failed its convergence certificate: learned steps "
-                       f"{learned.get('converged')}/{learned.get('starts')}, euler "
-                       f"{euler.get('converged')}/{euler.get('starts')} starts reached the goal")
+        return False, (
+            f"the model failed its convergence certificate: learned steps "
+            f"{learned.get('converged')}/{learned.get('starts')}, euler "
+            f"{euler.get('converged')}/{euler.get('starts')} starts reached the goal"
+        )
     if cert.get("field_sha256") != field_digest(field):
         return False, "the certificate does not match this model's weights (edited after training?)"
     rho = field.spectral_radius()
     if not rho < 1.0:
         return False, f"spectral radius of K is {rho:.4f} >= 1"
-    return True, (f"certified: {cert['learned']['converged']}/{cert['learned']['starts']} grid starts converge "
-                  f"for both integrators (worst end distance "
-                  f"{max(cert['learned']['worst_end_distance'], cert['euler']['worst_end_distance']):.3g})")
+    return True, (
+        f"certified: {cert['learned']['converged']}/{cert['learned']['starts']} grid starts converge "
+        f"for both integrators (worst end distance "
+        f"{max(cert['learned']['worst_end_distance'], cert['euler']['worst_end_distance']):.3g})"
+    )
 
 
 def summary_lines(cert: dict) -> list[str]:
     """The certificate as a few human-readable lines (``koopguide eval``)."""
     grid = "x".join(str(n) for n in cert["grid"])
-    lines = [f"certificate  {'PASSED' if cert['passed'] else 'FAILED'}  ({grid} grid over "
-             f"{[round(v, 2) for v in cert['box_lo']]} .. {[round(v, 2) for v in cert['box_hi']]}, "
-             f"tolerance {cert['tolerance']:g})"]
-    for name, label in (("learned", f"{cert['learned_steps']} learned steps"),
-                        ("euler", f"Euler, {cert['learned_steps'] * cert['euler_substeps']} raw steps")):
+    lines = [
+        f"certificate  {'PASSED' if cert['passed'] else 'FAILED'}  ({grid} grid over "
+        f"{[round(v, 2) for v in cert['box_lo']]} .. {[round(v, 2) for v in cert['box_hi']]}, "
+        f"tolerance {cert['tolerance']:g})"
+    ]
+    for name, label in (
+        ("learned", f"{cert['learned_steps']} learned steps"),
+        ("euler", f"Euler, {cert['learned_steps'] * cert['euler_substeps']} raw steps"),
+    ):
         o = cert[name]
-        lines.append(f"  {label:<26} {o['converged']}/{o['starts']} converged, worst end distance "
-                     f"{o['worst_end_distance']:.3g}")
-    lines.append(f"  max |velocity| over the box {cert['max_speed_per_learned_step']:.3g} per learned step "
-                 f"({cert['max_speed_per_raw_sample']:.3g} per raw sample)")
+        lines.append(
+            f"  {label:<26} {o['converged']}/{o['starts']} converged, worst end distance {o['worst_end_distance']:.3g}"
+        )
+    lines.append(
+        f"  max |velocity| over the box {cert['max_speed_per_learned_step']:.3g} per learned step "
+        f"({cert['max_speed_per_raw_sample']:.3g} per raw sample)"
+    )
     return lines
 
 
@@ -195,7 +228,7 @@ class FunnelSettings:
     margin: float  # relative and absolute slack over the learned field's own ratio on the demos
     table_nodes: int  # total nodes of the ratio table (per axis: its d-th root)
     table_enlarge: float  # the table covers the demos' box, each side moved out by this fraction
-    grid: int  # certificate starts per axis
+    grid: int  # certificate starts per axis in 2-D; in d dimensions ceil(grid^(2/d)) per axis (>= grid^2 starts)
     enlarge: float  # certificate box: the demos' box, each side moved out by this fraction
     tolerance: float  # model units: a start converges if it ends this close to the goal
     learned_steps: int  # horizon of the learned-step integrator (x 'substeps' raw Euler steps)
@@ -208,8 +241,9 @@ def enlarged_box(bounds: tuple[np.ndarray, np.ndarray], per_side: float) -> tupl
     return lo - per_side * (hi - lo), hi + per_side * (hi - lo)
 
 
-def certify_and_repair(field: FlowField, samples: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
-                       cfg: FunnelSettings) -> tuple[FlowField, dict]:
+def certify_and_repair(
+    field: FlowField, samples: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], cfg: FunnelSettings
+) -> tuple[FlowField, dict]:
     """Fit the Lyapunov limit to ``field``, certify it, and repair failures until it passes.
 
     Repairs carve the limit down to ``outside`` around the tails of the failing trajectories (where they
@@ -221,11 +255,13 @@ def certify_and_repair(field: FlowField, samples: np.ndarray, bounds: tuple[np.n
     lo_t, hi_t = enlarged_box(bounds, cfg.table_enlarge)
     per_axis = max(2, round(cfg.table_nodes ** (1.0 / field.dim)))
     width = cfg.tube_width * float(np.linalg.norm(bounds[1] - bounds[0]))
-    limit = lyapunov.build_limit(field.learned_step, samples, field.goal, lo_t, hi_t, (per_axis,) * field.dim,
-                                 cfg.outside, width, cfg.margin)
+    limit = lyapunov.build_limit(
+        field.learned_step, samples, field.goal, lo_t, hi_t, (per_axis,) * field.dim, cfg.outside, width, cfg.margin
+    )
     lo_c, hi_c = enlarged_box(bounds, cfg.enlarge)
     rounds: list[dict] = []
-    X0 = grid_starts(lo_c, hi_c, cfg.grid)
+    per_axis_c = math.ceil(cfg.grid ** (2.0 / field.dim) - 1e-9)
+    X0 = grid_starts(lo_c, hi_c, per_axis_c)
     limited = field
     for attempt in range(cfg.repairs + 2):
         limited = limited.with_limit(limit)
@@ -236,7 +272,7 @@ def certify_and_repair(field: FlowField, samples: np.ndarray, bounds: tuple[np.n
             if len(failing):
                 rounds.append({"learned": int(len(X0) - len(failing)), "euler": None})
         if final or not len(failing):
-            cert, failing = certify_detail(limited, lo_c, hi_c, cfg.grid, cfg.tolerance, cfg.learned_steps, 0.01)
+            cert, failing = certify_detail(limited, lo_c, hi_c, per_axis_c, cfg.tolerance, cfg.learned_steps, 0.01)
             rounds.append({"learned": cert["learned"]["converged"], "euler": cert["euler"]["converged"]})
             if cert["passed"] or final:
                 break

@@ -22,6 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--lasa", metavar="SHAPE", help=f"a LASA shape ({', '.join(data.LASA_SHAPES[:4])}, ...)")
     src.add_argument("--demos", metavar="PATH", type=Path, help="a .csv/.npy file or a folder of them")
+    src.add_argument("--synthetic", metavar="NAME", choices=["helix"], help="a generated set: helix (3-D)")
     p.add_argument("-o", "--output", required=True, type=Path, help="model file to write (.pt)")
     p.add_argument("--config", type=Path, help="YAML overriding config/train.yaml")
     p.add_argument("--seed", type=int, default=0, help="random seed (training is deterministic per seed)")
@@ -42,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("model", type=Path)
     p.add_argument("-o", "--output", required=True, type=Path)
     p.add_argument("--demos", metavar="PATH", help="demos to draw (default: the training data)")
+    p.add_argument("--eigenfunctions", action="store_true",
+                   help="map magnitude and phase of the leading Koopman eigenfunctions instead (2-D)")
+    p.add_argument("--count", type=int, default=4, help="eigenfunctions to map (default 4)")
     p.set_defaults(run=cmd_plot)
 
     p = sub.add_parser("bench", help="benchmarks that print figures (never timed tests)")
@@ -67,7 +71,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from koopguide.learn import trainer
 
     cfg = training_config(args.config)
-    demos = demos_from(args.lasa, args.demos)
+    demos = data.load_source(f"synthetic:{args.synthetic}") if args.synthetic else demos_from(args.lasa, args.demos)
     if not args.output.parent.exists():
         raise FileNotFoundError(f"output folder {args.output.parent} does not exist")
     log = (lambda *_: None) if args.quiet else _stderr
@@ -192,15 +196,24 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 # -------------------------------------------------------------------------------------- plot
 def cmd_plot(args: argparse.Namespace) -> int:
-    from koopguide.plot import plot_field
+    from koopguide.plot import plot_eigenfunctions, plot_field, plot_field_3d
 
     field = load_field(args.model)
     demos = training_demos(field, args.demos)
-    if field.dim != 2:
-        raise ValueError(f"plot draws 2-D fields; this model has dimension {field.dim}")
+    if field.dim not in (2, 3) or (args.eigenfunctions and field.dim != 2):
+        raise ValueError(f"plot draws 2-D fields (and 3-D trajectories without --eigenfunctions); this model has "
+                         f"dimension {field.dim}")
+    if not 1 <= args.count <= 16:
+        raise ValueError(f"--count must be in [1, 16], got {args.count}")
     if not args.output.parent.exists():
         raise FileNotFoundError(f"output folder {args.output.parent} does not exist")
-    plot_field(field, demos, args.output, title=f"{demos.source}  ({args.model.name})")
+    title = f"{demos.source}  ({args.model.name})"
+    if args.eigenfunctions:
+        plot_eigenfunctions(field, demos, args.output, count=args.count, title=title)
+    elif field.dim == 3:
+        plot_field_3d(field, demos, args.output, title=title)
+    else:
+        plot_field(field, demos, args.output, title=title)
     _stderr(f"wrote {args.output}")
     return 0
 

@@ -16,8 +16,7 @@ from koopguide import data
 from koopguide.field import FlowField
 
 
-def edmd_field(demos: data.Demonstrations, nu: int, subsample_every: int, seed: int,
-               ridge: float = 1e-6) -> FlowField:
+def edmd_field(demos: data.Demonstrations, nu: int, subsample_every: int, seed: int, ridge: float = 1e-6) -> FlowField:
     """A plain (uncertified) FlowField with ``K`` fitted by ridge least squares on the chord pairs."""
     x, y, _ = data.pairs(demos, subsample_every, 0.0)
     d = demos.dim
@@ -34,5 +33,13 @@ def edmd_field(demos: data.Demonstrations, nu: int, subsample_every: int, seed: 
     lam = ridge * np.trace(gram) / len(gram)
     K_T = PX.T @ np.linalg.solve(gram + lam * np.eye(len(gram)), PY)  # (nu + d, nu + d) = K^T
     # K = A B^T with A = K, B = I: rank nu + d
-    return FlowField(W, b, K_T.T, np.eye(nu + d), demos.goal, goal_centred=False, substeps=subsample_every,
-                     meta={"bounds_lo": demos.bounds[0].tolist(), "bounds_hi": demos.bounds[1].tolist()})
+    return FlowField(
+        W,
+        b,
+        K_T.T,
+        np.eye(nu + d),
+        demos.goal,
+        goal_centred=False,
+        substeps=subsample_every,
+        meta={"bounds_lo": demos.bounds[0].tolist(), "bounds_hi": demos.bounds[1].tolist()},
+    )

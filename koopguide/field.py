@@ -61,6 +61,7 @@ class FlowField:
         self._fW = self._two_pi_W_T.astype(fdt)
         self._fb = self._two_pi_b.astype(fdt)
         self._fC = self._cBA_f.astype(fdt)
+        self._goal_list = self.goal.tolist()
         self._offset = np.zeros(d)
         if self.goal_centred:  # f(x) = g + [K (Psi(x) - Psi(g))]_{1:d}, in the same arithmetic as queries
             self._offset = self.goal - self.learned_step(self.goal[None])[0]
@@ -102,11 +103,12 @@ class FlowField:
         if self._table is not None:
             fg = self._table.at_one(x)
             if fg is not None:
-                return limit_step_one(x, np.array(fg[: self.dim]), self.goal, fg[self.dim])
-        y = x @ self._BA_x + (np.cos(x.astype(self._fW.dtype) @ self._fW + self._fb) @ self._fC) + self._offset
+                return np.array(limit_step_one(x, fg, self._goal_list, fg[self.dim]))
+        y = self.learned_step(x[None])[0]  # the batch arithmetic, so one point and a batch agree bit for bit
         if self.limit is None:
             return y
-        return limit_step_one(x, y, self.goal, self.limit.ratio_one(x) if self._table is None else self.limit.outside)
+        gamma = self.limit.ratio_one(x) if self._table is None else self.limit.outside
+        return np.array(limit_step_one(x, y.tolist(), self._goal_list, gamma))
 
     def learned_step(self, X: np.ndarray) -> np.ndarray:
         """The trained map ``f(x)`` itself, without the Lyapunov limit: ``(N, d) -> (N, d)``."""
@@ -118,6 +120,11 @@ class FlowField:
     def velocity(self, X: np.ndarray) -> np.ndarray:
         """Displacement over one learned step, ``step(X) - X`` (divide by ``substeps`` per raw sample)."""
         X = np.asarray(X, dtype=np.float64)
+        if X.shape == (self.dim,) and self._table is not None:  # the one-point hot path, in plain floats
+            fg = self._table.at_one(X)
+            if fg is not None:
+                y = limit_step_one(X, fg, self._goal_list, fg[self.dim])
+                return np.array([y[k] - X.item(k) for k in range(self.dim)])
         return self.step(X) - X
 
     def lift(self, X: np.ndarray) -> np.ndarray:
@@ -170,6 +177,19 @@ class FlowField:
         lam = np.concatenate([core, np.zeros(self.nu + self.dim - self.rank, dtype=np.complex128)])
         return lam[np.argsort(-np.abs(lam), kind="stable")]
 
+    def eigenfunctions(self, X: np.ndarray, count: int = 4) -> tuple[np.ndarray, np.ndarray]:
+        """Leading Koopman eigenfunctions ``phi_i(x) = y_i^H B^T Psi(x)`` at rows of ``X``: ``(lam (k,), phi (N, k))``.
+
+        ``y_i`` is a left eigenvector of the core ``B^T A`` (``y^H B^T A = lam y^H``), so ``w_i = B y_i``
+        is a left eigenvector of ``K = A B^T`` and ``phi_i(K z) = lam_i phi_i(z)`` along the lifted linear
+        system. Of each conjugate pair only the one with ``Im lam >= 0`` is returned; largest ``|lam|`` first.
+        """
+        lam, Y = np.linalg.eig((self.B.T @ self.A).T)  # right eigenvectors of M^T = left of M
+        keep = np.flatnonzero(lam.imag >= -1e-12)
+        keep = keep[np.argsort(-np.abs(lam[keep]), kind="stable")][:count]
+        phi = (self.lift(X) @ self.B) @ Y[:, keep]  # y^T (B^T Psi) with y the eigenvector of M^T
+        return lam[keep], phi
+
     def spectral_radius(self) -> float:
         return float(np.max(np.abs(np.linalg.eigvals(self.B.T @ self.A))))
 
@@ -204,8 +224,8 @@ def load_field(path: str | Path) -> FlowField:
                      limit=limit)
 
 
-#: Target node count of the query table (per axis: its d-th root, nested in the limit's grid).
-QUERY_TABLE_NODES = 1 << 16
+#: Target node count of the query table by dimension (per axis: its d-th root, nested in the limit's grid).
+QUERY_TABLE_NODES = {2: 1 << 16, 3: 1 << 17}
 
 
 def _query_table(field: FlowField, limit: RatioLimit, f_values: np.ndarray | None = None) -> GridTable | None:
@@ -215,10 +235,10 @@ def _query_table(field: FlowField, limit: RatioLimit, f_values: np.ndarray | Non
     the limit's ``gamma`` exactly and ``f`` to within the error ``koopguide bench speed`` reports.
     Dimensions above 3 are not tabulated (exact evaluation).
     """
-    if field.dim > 3:
+    if field.dim not in QUERY_TABLE_NODES:
         return None
     coarse = np.asarray(limit.table.shape)
-    m = max(1, int((QUERY_TABLE_NODES ** (1.0 / field.dim) - 1) // int(np.max(coarse - 1))))
+    m = max(1, int((QUERY_TABLE_NODES[field.dim] ** (1.0 / field.dim) - 1) // int(np.max(coarse - 1))))
     fine = tuple(int(n) for n in (coarse - 1) * m + 1)
     axes = [np.linspace(limit.lo[k], limit.hi[k], n) for k, n in enumerate(fine)]
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, field.dim)

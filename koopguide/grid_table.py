@@ -27,6 +27,10 @@ class GridTable:
         self._top = np.asarray(self.shape, dtype=np.float64) - 1.0
         self._scale = self._top / (self.hi - self.lo)
         self._strides = np.array([int(np.prod(self.shape[k + 1 :])) for k in range(d)], dtype=np.intp)
+        self._lo_list = self.lo.tolist()  # plain-Python copies for the one-point path
+        self._scale_list = self._scale.tolist()
+        self._stride_list = [int(v) for v in self._strides]
+        self._items = self.values.ravel()  # .item(j) reads one float without building an array
         self._offsets = []  # (flat offset, bits) of each of the 2^d cell corners
         for corner in range(1 << d):
             bits = [(corner >> k) & 1 for k in range(d)]
@@ -34,7 +38,7 @@ class GridTable:
 
     def inside(self, X: np.ndarray) -> np.ndarray | None:
         """``(N,)`` bool: rows of ``X`` within ``[lo, hi]``; None when every row is (the common case)."""
-        if np.all(X.min(axis=0) >= self.lo) and np.all(X.max(axis=0) <= self.hi):
+        if len(X) == 0 or (np.all(X.min(axis=0) >= self.lo) and np.all(X.max(axis=0) <= self.hi)):
             return None
         ok = np.ones(X.shape[0], dtype=bool)
         for k in range(X.shape[1]):
@@ -65,21 +69,22 @@ class GridTable:
         """The interpolated value at one state ``(d,)`` in plain Python, or None outside the box."""
         base, frac, idx = [], [], 0
         for k, n in enumerate(self.shape):
-            u = (float(x[k]) - float(self.lo[k])) * float(self._scale[k])
+            u = (x.item(k) - self._lo_list[k]) * self._scale_list[k]
             if not 0.0 <= u <= n - 1:
                 return None
             i = min(int(u), n - 2)
-            base.append(i)
             frac.append(u - i)
-            idx += i * int(self._strides[k])
-        total = [0.0] * self.channels
+            idx += i * self._stride_list[k]
+        c_count, items = self.channels, self._items
+        total = [0.0] * c_count
         for offset, bits in self._offsets:
             w = 1.0
             for k, bit in enumerate(bits):
                 w *= frac[k] if bit else 1.0 - frac[k]
-            row = self._flat[idx + offset]
-            for c in range(self.channels):
-                total[c] += w * float(row[c])
+            start = (idx + offset) * c_count
+            for c in range(c_count):
+                total[c] += w * items.item(start + c)
+        del base
         return total
 
     def nodes(self) -> np.ndarray:

@@ -56,13 +56,21 @@ def run_one(job: dict) -> dict:
     total_s = time.perf_counter() - started
     m = evaluate(field, demos, starts=500, seed=1000 + job["seed"])
     row = {k: job[k] for k in ("label", "shape", "seed")}
-    row.update(sea=m["sea"], dtwd=m["dtwd"], converged=m["converged"], converged_euler=m["converged_euler"],
-               worst=max(m["final_distance_max"], m["final_distance_max_euler"]), rho=m["rho"],
-               goal_err=m["goal_fixed_point_err"], fit_seconds=fit_s, train_seconds=total_s,
-               eval_seconds=time.perf_counter() - started - total_s,
-               certified=None if cert is None else bool(cert["passed"]),
-               repairs=None if cert is None else len(cert["repairs"]) - 1,
-               rho_trained=info.get("rho_trained"))
+    row.update(
+        sea=m["sea"],
+        dtwd=m["dtwd"],
+        converged=m["converged"],
+        converged_euler=m["converged_euler"],
+        worst=max(m["final_distance_max"], m["final_distance_max_euler"]),
+        rho=m["rho"],
+        goal_err=m["goal_fixed_point_err"],
+        fit_seconds=fit_s,
+        train_seconds=total_s,
+        eval_seconds=time.perf_counter() - started - total_s,
+        certified=None if cert is None else bool(cert["passed"]),
+        repairs=None if cert is None else len(cert["repairs"]) - 1,
+        rho_trained=info.get("rho_trained"),
+    )
     return row
 
 
@@ -88,15 +96,33 @@ def main(argv: list[str] | None = None) -> int:
     cfg_file = str(args.config) if args.config else None
     args.models = args.models or args.output / "models"
     models = str(args.models)
-    jobs = [dict(kind="koop", label="default", label_dir="default", shape=s, seed=k, config_file=cfg_file,
-                 models=models) for k in seeds for s in shapes]
+    jobs = [
+        dict(kind="koop", label="default", label_dir="default", shape=s, seed=k, config_file=cfg_file, models=models)
+        for k in seeds
+        for s in shapes
+    ]
     main_count = len(jobs)
     paper_file = str(Path(__file__).resolve().parent.parent / "config" / "paper.yaml")
-    jobs += [dict(kind="koop", label="paper", label_dir="paper", shape=s, seed=k, config_file=paper_file,
-                  models=None) for k in paper_seeds for s in shapes]
+    jobs += [
+        dict(kind="koop", label="paper", label_dir="paper", shape=s, seed=k, config_file=paper_file, models=None)
+        for k in paper_seeds
+        for s in shapes
+    ]
     for name, layer in ABLATIONS.items():
-        jobs += [dict(kind="koop", label=name, label_dir=name, shape=s, seed=k, config_file=None,
-                      layers=[{"convergence": None}, layer], models=None) for k in abl_seeds for s in abl_shapes]
+        jobs += [
+            dict(
+                kind="koop",
+                label=name,
+                label_dir=name,
+                shape=s,
+                seed=k,
+                config_file=None,
+                layers=[{"convergence": None}, layer],
+                models=None,
+            )
+            for k in abl_seeds
+            for s in abl_shapes
+        ]
     jobs += [dict(kind="edmd", label="EDMD", shape=s, seed=k) for k in abl_seeds for s in abl_shapes]
 
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -109,13 +135,25 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(row)
             if i + 1 == main_count:
                 main_wall = time.perf_counter() - started
-            print(f"[{i + 1}/{len(jobs)}] {row['label']:<18} {row['shape']:<16} seed {row['seed']}  SEA "
-                  f"{_f(row['sea'])}  DTWD {_f(row['dtwd'])}  conv {row['converged']}/{row['converged_euler']}  "
-                  f"cert {row['certified']}  {row['train_seconds']:.1f}+{row['eval_seconds']:.1f} s", flush=True)
+            print(
+                f"[{i + 1}/{len(jobs)}] {row['label']:<18} {row['shape']:<16} seed {row['seed']}  SEA "
+                f"{_f(row['sea'])}  DTWD {_f(row['dtwd'])}  conv {row['converged']}/{row['converged_euler']}  "
+                f"cert {row['certified']}  {row['train_seconds']:.1f}+{row['eval_seconds']:.1f} s",
+                flush=True,
+            )
     wall = time.perf_counter() - started
-    meta = {"shapes": shapes, "seeds": seeds, "paper_seeds": paper_seeds, "ablation_seeds": abl_seeds,
-            "ablation_shapes": abl_shapes, "workers": args.workers, "main_wall_seconds": main_wall,
-            "wall_seconds": wall, "load_average": os.getloadavg(), "cpus": os.cpu_count()}
+    meta = {
+        "shapes": shapes,
+        "seeds": seeds,
+        "paper_seeds": paper_seeds,
+        "ablation_seeds": abl_seeds,
+        "ablation_shapes": abl_shapes,
+        "workers": args.workers,
+        "main_wall_seconds": main_wall,
+        "wall_seconds": wall,
+        "load_average": os.getloadavg(),
+        "cpus": os.cpu_count(),
+    }
     (args.output / "results.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
     from koopguide.lasa_report import write_report
 
@@ -153,4 +191,3 @@ def _ints(text: str) -> list[int]:
 
 if __name__ == "__main__":
     sys.exit(main())
-

@@ -78,16 +78,21 @@ def _row_sq(e: np.ndarray) -> np.ndarray:
     return out
 
 
-def limit_step_one(x: np.ndarray, y: np.ndarray, goal: np.ndarray, gamma: float) -> np.ndarray:
-    """:func:`limit_step` for one state (plain Python arithmetic, no temporaries)."""
-    e = [float(x[k]) - float(goal[k]) for k in range(len(goal))]
-    n = [float(y[k]) - float(goal[k]) for k in range(len(goal))]
-    allowed = gamma * math.sqrt(sum(v * v for v in e))
-    have = math.sqrt(sum(v * v for v in n))
+def limit_step_one(x: np.ndarray, y: list[float], goal: list[float], gamma: float) -> list[float]:
+    """:func:`limit_step` for one state, in plain Python floats (``x`` an array, ``y`` and ``goal`` lists)."""
+    e2 = 0.0
+    n2 = 0.0
+    for k, g in enumerate(goal):
+        e = x.item(k) - g
+        e2 += e * e
+        n = y[k] - g
+        n2 += n * n
+    allowed = gamma * math.sqrt(e2)
+    have = math.sqrt(n2)
     if have <= allowed:
         return y
     s = allowed / have
-    return np.array([float(goal[k]) + n[k] * s for k in range(len(goal))])
+    return [g + (y[k] - g) * s for k, g in enumerate(goal)]
 
 
 def smoothstep(t: np.ndarray) -> np.ndarray:
@@ -96,8 +101,17 @@ def smoothstep(t: np.ndarray) -> np.ndarray:
     return t * t * (3.0 - 2.0 * t)
 
 
-def build_limit(step, samples: np.ndarray, goal: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                nodes: tuple[int, ...], outside: float, tube_width: float, margin: float) -> RatioLimit:
+def build_limit(
+    step,
+    samples: np.ndarray,
+    goal: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    nodes: tuple[int, ...],
+    outside: float,
+    tube_width: float,
+    margin: float,
+) -> RatioLimit:
     """The ratio table for a learned step ``step((N, d)) -> (N, d)`` and demonstration ``samples``.
 
     At each demonstration sample ``s`` the field needs ``rho(s) = |f(s) - g| / |s - g|``; a node at
@@ -120,8 +134,9 @@ def build_limit(step, samples: np.ndarray, goal: np.ndarray, lo: np.ndarray, hi:
     near_d, near_i = near_d.reshape(len(grid), k), near_i.reshape(len(grid), k)
     tau = smoothstep(1.0 - near_d / tube_width)
     table = outside + np.max(tau * excess[near_i], axis=1)
-    return RatioLimit(lo=np.asarray(lo, float), hi=np.asarray(hi, float), table=table.reshape(nodes),
-                      outside=float(outside))
+    return RatioLimit(
+        lo=np.asarray(lo, float), hi=np.asarray(hi, float), table=table.reshape(nodes), outside=float(outside)
+    )
 
 
 def carve(limit: RatioLimit, points: np.ndarray, radius: float) -> RatioLimit:
@@ -138,5 +153,4 @@ def carve(limit: RatioLimit, points: np.ndarray, radius: float) -> RatioLimit:
 
 def contracting(limit: RatioLimit) -> RatioLimit:
     """``gamma = outside`` everywhere: the global contraction every repair ends in at worst."""
-    return RatioLimit(lo=limit.lo, hi=limit.hi, table=np.full(limit.table.shape, limit.outside),
-                      outside=limit.outside)
+    return RatioLimit(lo=limit.lo, hi=limit.hi, table=np.full(limit.table.shape, limit.outside), outside=limit.outside)

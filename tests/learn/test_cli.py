@@ -24,7 +24,7 @@ def trained(tmp_path_factory):
 
 def test_train_reports_progress_with_loss_terms(trained):
     _, out = trained
-    assert "step  2475/2475" in out.stderr and "koopman" in out.stderr and "divergence" in out.stderr
+    assert "step   600/600" in out.stderr and "koopman" in out.stderr and "divergence" in out.stderr
     assert "wrote" in out.stderr
 
 
@@ -38,6 +38,32 @@ def test_eval_json_has_the_documented_metrics(trained):
     assert metrics["goal_fixed_point_err"] == 0.0
     assert metrics["rho"] < 1.0
     assert metrics["starts"] == 100 and metrics["converged"] >= 95
+
+
+def test_train_writes_a_certificate_and_eval_prints_it(trained):
+    tmp, out = trained
+    assert "certificate  PASSED  (100x100 grid" in out.stderr
+    ev = koopguide("eval", str(tmp / "sine.pt"), "--starts", "100")
+    assert ev.returncode == 0, ev.stderr
+    assert "certificate  PASSED" in ev.stdout and "certified    yes" in ev.stdout
+    assert "10000/10000 converged" in ev.stdout  # both integrators, the whole grid
+    metrics = json.loads(koopguide("eval", str(tmp / "sine.pt"), "--json", "--starts", "100").stdout)
+    assert metrics["converged_euler"] == 100 and metrics["certificate"]["passed"] is True
+
+
+def test_uncertified_model_is_refused_unless_allowed(tmp_path):
+    cfg = tmp_path / "raw.yaml"
+    cfg.write_text(SMALL + "convergence: null\n")
+    target = tmp_path / "raw.pt"
+    out = koopguide("train", "--lasa", "Sine", "-o", str(target), "--config", str(cfg), "--quiet")
+    assert out.returncode == 2 and not target.exists()
+    assert out.stderr.count("\n") == 1 and "refusing to write" in out.stderr and "--allow-uncertified" in out.stderr
+    out = koopguide("train", "--lasa", "Sine", "-o", str(target), "--config", str(cfg), "--quiet",
+                    "--allow-uncertified")
+    assert out.returncode == 0 and target.exists()
+    assert "WARNING" in out.stderr and "UNCERTIFIED" in out.stderr
+    ev = koopguide("eval", str(target), "--starts", "20")
+    assert ev.returncode == 0 and "certified    NO: the model file carries no convergence certificate" in ev.stdout
 
 
 def test_plot_writes_a_png(trained):

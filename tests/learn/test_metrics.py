@@ -76,7 +76,7 @@ def test_eval_numbers_agree_with_independent_implementations(small_trained, zsha
     assert metrics["dtwd"] == pytest.approx(dtwd, rel=1e-9)
 
 
-def test_convergence_box_is_ten_percent_larger_about_the_centre():
+def test_convergence_box_moves_each_side_out_by_ten_percent_about_the_centre():
     lo, hi = convergence_box((np.array([-40.0, 0.0]), np.array([0.0, 50.0])), 0.10)
-    np.testing.assert_allclose(hi - lo, [44.0, 55.0])
+    np.testing.assert_allclose(hi - lo, [48.0, 60.0])
     np.testing.assert_allclose((hi + lo) / 2, [-20.0, 25.0])
