@@ -103,7 +103,7 @@ class FlowField:
         if self._table is not None:
             fg = self._table.at_one(x)
             if fg is not None:
-                return np.array(limit_step_one(x, fg, self._goal_list, fg[self.dim]))
+                return np.array(limit_step_one(x, fg[: self.dim], self._goal_list, fg[self.dim]))
         y = self.learned_step(x[None])[0]  # the batch arithmetic, so one point and a batch agree bit for bit
         if self.limit is None:
             return y
@@ -111,11 +111,18 @@ class FlowField:
         return np.array(limit_step_one(x, y.tolist(), self._goal_list, gamma))
 
     def learned_step(self, X: np.ndarray) -> np.ndarray:
-        """The trained map ``f(x)`` itself, without the Lyapunov limit: ``(N, d) -> (N, d)``."""
+        """The trained map ``f(x)`` itself, without the Lyapunov limit: ``(N, d) -> (N, d)``.
+
+        Row-wise arithmetic only (elementwise phases, float64 projection), so a row's answer does not
+        depend on the batch it came in.
+        """
         X = self._as_batch(np.asarray(X, dtype=np.float64))
-        phase = X.astype(self._fW.dtype) @ self._fW
+        Xf = X.astype(self._fW.dtype)
+        phase = Xf[:, 0:1] * self._fW[0]
+        for k in range(1, self.dim):
+            phase += Xf[:, k : k + 1] * self._fW[k]
         phase += self._fb
-        return X @ self._BA_x + np.cos(phase, out=phase) @ self._fC + self._offset
+        return X @ self._BA_x + np.cos(phase, out=phase) @ self._cBA_f + self._offset
 
     def velocity(self, X: np.ndarray) -> np.ndarray:
         """Displacement over one learned step, ``step(X) - X`` (divide by ``substeps`` per raw sample)."""

@@ -59,6 +59,9 @@ def test_queries_accept_one_state_or_a_batch(saved):
     assert field.step(x).shape == (2,)
     assert field.step(np.stack([x, x])).shape == (2, 2)
     np.testing.assert_allclose(field.velocity(x), field.step(x) - x)
+    X = np.random.default_rng(3).uniform(-60, 60, (50, 2))  # inside and outside the query table
+    batch = field.velocity(X)
+    np.testing.assert_allclose(np.array([field.velocity(p) for p in X]), batch, rtol=0, atol=1e-12)
     with pytest.raises(ValueError, match=r"expected a state of shape \(2,\) or \(N, 2\), got \(3,\)"):
         field.step(np.zeros(3))
 
