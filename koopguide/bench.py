@@ -86,8 +86,9 @@ def main(argv: list[str] | None = None) -> int:
         model = Path(tmp) / "bench.pt"
         save(model, trained, demos, cfg)
         env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}  # one BLAS thread, as benched
-        out = subprocess.run([sys.executable, "-c", QUERY_SCRIPT, str(model)], capture_output=True, text=True,
-                             check=True, env=env)
+        out = subprocess.run(
+            [sys.executable, "-c", QUERY_SCRIPT, str(model)], capture_output=True, text=True, check=True, env=env
+        )
     query = json.loads(out.stdout)
     figures = {
         "shape": args.lasa,
@@ -104,21 +105,29 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(figures, indent=2))
         return 0
-    print(f"training   {args.lasa}, {cfg.optim.steps} steps, {cfg.threads} thread(s): fit median "
-          f"{figures['fit_seconds_median']:.2f} s ({', '.join(f'{t:.2f}' for t in fits)}); certify-and-repair median "
-          f"{figures['certify_seconds_median']:.2f} s; total median {figures['train_seconds_median']:.2f} s "
-          f"over {len(times)} runs; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
+    print(
+        f"training   {args.lasa}, {cfg.optim.steps} steps, {cfg.threads} thread(s): fit median "
+        f"{figures['fit_seconds_median']:.2f} s ({', '.join(f'{t:.2f}' for t in fits)}); certify-and-repair median "
+        f"{figures['certify_seconds_median']:.2f} s; total median {figures['train_seconds_median']:.2f} s "
+        f"over {len(times)} runs; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
+    )
     print(f"           peak RSS of the training process {train_rss:.0f} MB")
-    print(f"query      field.velocity, one point: median {query['single_us_median']:.1f} us "
-          f"(best {query['single_us_best']:.1f} us); torch imported: {query['torch_imported']}")
+    print(
+        f"query      field.velocity, one point: median {query['single_us_median']:.1f} us "
+        f"(best {query['single_us_best']:.1f} us); torch imported: {query['torch_imported']}"
+    )
     for n, rate in query["batch_points_per_s"].items():
         print(f"           batch of {int(n):>6}: {rate / 1e6:.2f} M points/s")
     e = query["errors"]
-    print(f"accuracy   vs float64 exact evaluation of the same limited field over the box (median |v| "
-          f"{e['median_speed']:.3g}): float32 alone max {e['float32_max']:.2g}; query table + float32 max "
-          f"{e['table_float32_max']:.2g}, p99 {e['table_float32_p99']:.2g} (tabulated: {query['tabulated']})")
-    print(f"           load_field {query['load_s'] * 1e3:.1f} ms; peak RSS of the query process "
-          f"{query['peak_rss_mb']:.0f} MB (numpy only)")
+    print(
+        f"accuracy   vs float64 exact evaluation of the same limited field over the box (median |v| "
+        f"{e['median_speed']:.3g}): float32 alone max {e['float32_max']:.2g}; query table + float32 max "
+        f"{e['table_float32_max']:.2g}, p99 {e['table_float32_p99']:.2g} (tabulated: {query['tabulated']})"
+    )
+    print(
+        f"           load_field {query['load_s'] * 1e3:.1f} ms; peak RSS of the query process "
+        f"{query['peak_rss_mb']:.0f} MB (numpy only)"
+    )
     return 0
 
 

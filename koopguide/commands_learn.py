@@ -27,8 +27,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=Path, help="YAML overriding config/train.yaml")
     p.add_argument("--seed", type=int, default=0, help="random seed (training is deterministic per seed)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
-    p.add_argument("--allow-uncertified", action="store_true",
-                   help="write the model even if it fails its convergence certificate (a loud warning)")
+    p.add_argument(
+        "--allow-uncertified",
+        action="store_true",
+        help="write the model even if it fails its convergence certificate (a loud warning)",
+    )
     p.set_defaults(run=cmd_train)
 
     p = sub.add_parser("eval", help="SEA, DTWD, convergence, fixed-point error and spectral radius")
@@ -43,15 +46,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("model", type=Path)
     p.add_argument("-o", "--output", required=True, type=Path)
     p.add_argument("--demos", metavar="PATH", help="demos to draw (default: the training data)")
-    p.add_argument("--eigenfunctions", action="store_true",
-                   help="map magnitude and phase of the leading Koopman eigenfunctions instead (2-D)")
+    p.add_argument(
+        "--eigenfunctions",
+        action="store_true",
+        help="map magnitude and phase of the leading Koopman eigenfunctions instead (2-D)",
+    )
     p.add_argument("--count", type=int, default=4, help="eigenfunctions to map (default 4)")
     p.set_defaults(run=cmd_plot)
 
     p = sub.add_parser("bench", help="benchmarks that print figures (never timed tests)")
-    p.add_argument("what", choices=["speed", "lasa", "sitl", "guidance"],
-                   help="speed: training and query speed; lasa: all LASA shapes, seeds, ablations and a report; "
-                   "sitl: simulator; guidance: service latency and CPU")
+    p.add_argument(
+        "what",
+        choices=["speed", "lasa", "sitl", "guidance"],
+        help="speed: training and query speed; lasa: all LASA shapes, seeds, ablations and a report; "
+        "sitl: simulator; guidance: service latency and CPU",
+    )
     p.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the benchmark")
     p.set_defaults(run=cmd_bench)
 
@@ -76,8 +85,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise FileNotFoundError(f"output folder {args.output.parent} does not exist")
     log = (lambda *_: None) if args.quiet else _stderr
     n_pairs = sum(len(data.subsample(t, cfg.subsample_every)) - 1 for t in demos.trajectories)
-    log(f"training on {demos.source}: {len(demos.trajectories)} demos, dim {demos.dim}, {n_pairs} pairs, "
-        f"{cfg.optim.steps} steps, seed {args.seed}")
+    log(
+        f"training on {demos.source}: {len(demos.trajectories)} demos, dim {demos.dim}, {n_pairs} pairs, "
+        f"{cfg.optim.steps} steps, seed {args.seed}"
+    )
 
     def progress(k: int, steps: int, terms: dict[str, float]) -> None:
         log(f"  step {k:5d}/{steps}  " + "  ".join(f"{name} {value:.3e}" for name, value in terms.items()))
@@ -86,22 +97,30 @@ def cmd_train(args: argparse.Namespace) -> int:
     info = trained.info
     cert = trained.certificate
     if cert is None or not cert["passed"]:
-        why = ("no certificate was made (convergence: null)" if cert is None else
-               f"the certificate FAILED: {cert['learned']['converged']}/{cert['learned']['starts']} learned-step and "
-               f"{cert['euler']['converged']}/{cert['euler']['starts']} Euler grid starts reached the goal")
+        why = (
+            "no certificate was made (convergence: null)"
+            if cert is None
+            else f"the certificate FAILED: {cert['learned']['converged']}/{cert['learned']['starts']} learned-step and "
+            f"{cert['euler']['converged']}/{cert['euler']['starts']} Euler grid starts reached the goal"
+        )
         if not args.allow_uncertified:
-            raise UncertifiedModelError(f"refusing to write {args.output}: {why}; "
-                                        "pass --allow-uncertified to write it anyway")
-        _stderr(f"WARNING: {why}. Writing {args.output} UNCERTIFIED (--allow-uncertified): trajectories may not "
-                "reach the goal, and koopguide run refuses it unless its config allows uncertified models.")
+            raise UncertifiedModelError(
+                f"refusing to write {args.output}: {why}; pass --allow-uncertified to write it anyway"
+            )
+        _stderr(
+            f"WARNING: {why}. Writing {args.output} UNCERTIFIED (--allow-uncertified): trajectories may not "
+            "reach the goal, and koopguide run refuses it unless its config allows uncertified models."
+        )
     save(args.output, trained, demos, cfg)
     if cert is not None:
         from koopguide.certificate import summary_lines
 
         for line in summary_lines(cert):
             log(line)
-    log(f"fit in {info['fit_seconds']:.2f} s, certified in {info['certify_seconds']:.2f} s; rho(K) {info['rho']:.3f}; "
-        f"wrote {args.output}")
+    log(
+        f"fit in {info['fit_seconds']:.2f} s, certified in {info['certify_seconds']:.2f} s; rho(K) {info['rho']:.3f}; "
+        f"wrote {args.output}"
+    )
     return 0
 
 
@@ -128,8 +147,11 @@ def save(path: Path, trained, demos: data.Demonstrations, cfg) -> None:
     weights = {"W": trained.W, "b": trained.b, "A": trained.A, "B": trained.B}
     if trained.limit is not None:
         weights["limit_table"] = trained.limit.table
-        meta["limit"] = {"lo": trained.limit.lo.tolist(), "hi": trained.limit.hi.tolist(),
-                         "outside": trained.limit.outside}
+        meta["limit"] = {
+            "lo": trained.limit.lo.tolist(),
+            "hi": trained.limit.hi.tolist(),
+            "outside": trained.limit.outside,
+        }
     if trained.certificate is not None:
         meta["certificate"] = trained.certificate
     modelfile.write(path, weights, meta)
@@ -146,8 +168,10 @@ def training_demos(field: FlowField, override: str | None) -> data.Demonstration
         raise ValueError("model file does not record its training data; pass --demos PATH")
     demos = data.load_source(source)
     if summary.get("sha256") and demos.digest() != summary["sha256"]:
-        raise ValueError(f"demos at {source} differ from those the model was trained on (sha256 mismatch); "
-                         f"pass --demos PATH to evaluate on other data")
+        raise ValueError(
+            f"demos at {source} differ from those the model was trained on (sha256 mismatch); "
+            f"pass --demos PATH to evaluate on other data"
+        )
     return demos
 
 
@@ -163,25 +187,32 @@ def cmd_eval(args: argparse.Namespace) -> int:
     metrics = evaluate(field, demos, starts=args.starts, seed=args.seed)
     bad = [k for k, v in metrics.items() if isinstance(v, float) and not math.isfinite(v)]
     if bad:
-        raise ValueError(f"{args.model}: the field gives non-finite metrics {bad} "
-                         f"({', '.join(f'{k}={metrics[k]}' for k in bad)})")
+        raise ValueError(
+            f"{args.model}: the field gives non-finite metrics {bad} ({', '.join(f'{k}={metrics[k]}' for k in bad)})"
+        )
     metrics["certificate"] = field.meta.get("certificate")
     metrics["model"] = str(args.model)
     metrics["source"] = demos.source
     if args.json:
         print(json.dumps(metrics, indent=2))
         return 0
-    print(f"model        {args.model}  ({demos.source}; dim {field.dim}, nu {field.nu}, rank {field.rank}, "
-          f"{'goal-centred' if field.goal_centred else 'paper lifting'})")
+    print(
+        f"model        {args.model}  ({demos.source}; dim {field.dim}, nu {field.nu}, rank {field.rank}, "
+        f"{'goal-centred' if field.goal_centred else 'paper lifting'})"
+    )
     if metrics["sea"] is not None:
         print(f"SEA          {metrics['sea']:.1f}   (mean over {len(demos.trajectories)} demos)")
     print(f"DTWD         {metrics['dtwd']:.1f}")
-    print(f"converged    {metrics['converged']}/{metrics['starts']} random starts within "
-          f"{metrics['convergence_tolerance']:g} of the goal after {metrics['convergence_steps']} learned steps "
-          f"(worst {metrics['final_distance_max']:.3g})")
-    print(f"converged    {metrics['converged_euler']}/{metrics['starts']} with Euler steps of velocity/"
-          f"{field.substeps} ({metrics['convergence_steps'] * field.substeps} raw steps; worst "
-          f"{metrics['final_distance_max_euler']:.3g})")
+    print(
+        f"converged    {metrics['converged']}/{metrics['starts']} random starts within "
+        f"{metrics['convergence_tolerance']:g} of the goal after {metrics['convergence_steps']} learned steps "
+        f"(worst {metrics['final_distance_max']:.3g})"
+    )
+    print(
+        f"converged    {metrics['converged_euler']}/{metrics['starts']} with Euler steps of velocity/"
+        f"{field.substeps} ({metrics['convergence_steps'] * field.substeps} raw steps; worst "
+        f"{metrics['final_distance_max_euler']:.3g})"
+    )
     print(f"goal fixed-point error   {metrics['goal_fixed_point_err']:.3g}")
     print(f"spectral radius of K     {metrics['rho']:.4f}")
     from koopguide.certificate import certificate_ok, summary_lines
@@ -201,8 +232,10 @@ def cmd_plot(args: argparse.Namespace) -> int:
     field = load_field(args.model)
     demos = training_demos(field, args.demos)
     if field.dim not in (2, 3) or (args.eigenfunctions and field.dim != 2):
-        raise ValueError(f"plot draws 2-D fields (and 3-D trajectories without --eigenfunctions); this model has "
-                         f"dimension {field.dim}")
+        raise ValueError(
+            f"plot draws 2-D fields (and 3-D trajectories without --eigenfunctions); this model has "
+            f"dimension {field.dim}"
+        )
     if not 1 <= args.count <= 16:
         raise ValueError(f"--count must be in [1, 16], got {args.count}")
     if not args.output.parent.exists():
@@ -239,4 +272,3 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def _stderr(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
-

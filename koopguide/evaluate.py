@@ -86,8 +86,15 @@ class ConvergenceResult:
     final_distance_median: float
 
 
-def convergence(field: FlowField, box: tuple[np.ndarray, np.ndarray], starts: int, steps: int,
-                tolerance: float, seed: int, integrator: str = "learned") -> ConvergenceResult:
+def convergence(
+    field: FlowField,
+    box: tuple[np.ndarray, np.ndarray],
+    starts: int,
+    steps: int,
+    tolerance: float,
+    seed: int,
+    integrator: str = "learned",
+) -> ConvergenceResult:
     """Uniform random starts in ``box``: ``steps`` learned steps (``integrator="learned"``) or
     ``steps * substeps`` Euler steps of ``velocity / substeps`` (``"euler"``), re-lifted each step."""
     from koopguide.certificate import run_to_goal
@@ -112,8 +119,16 @@ def nearest_fixed_point_error(field: FlowField, iterations: int = 2000) -> float
     return float(np.linalg.norm(x - field.goal))
 
 
-def evaluate(field: FlowField, demos: Demonstrations, *, starts: int = 500, steps: int = 100,
-             tolerance: float = 1.0, enlarge: float = 0.10, seed: int = 0) -> dict:
+def evaluate(
+    field: FlowField,
+    demos: Demonstrations,
+    *,
+    starts: int = 500,
+    steps: int = 100,
+    tolerance: float = 1.0,
+    enlarge: float = 0.10,
+    seed: int = 0,
+) -> dict:
     """All metrics as plain data (the JSON of ``koopguide eval --json``)."""
     reps = reproduce(field, demos)
     sea = [swept_error_area(d, r) for d, r in zip(demos.trajectories, reps, strict=True)] if field.dim == 2 else []

@@ -30,9 +30,20 @@ from koopguide.lyapunov import RatioLimit, limit_step, limit_step_one
 class FlowField:
     """A trained flow field. Build it with :func:`load_field` or from arrays."""
 
-    def __init__(self, W: np.ndarray, b: np.ndarray, A: np.ndarray, B: np.ndarray, goal: np.ndarray,
-                 goal_centred: bool, substeps: int, meta: dict[str, Any] | None = None,
-                 limit: RatioLimit | None = None, precision: str = "float32", tabulate: bool = True) -> None:
+    def __init__(
+        self,
+        W: np.ndarray,
+        b: np.ndarray,
+        A: np.ndarray,
+        B: np.ndarray,
+        goal: np.ndarray,
+        goal_centred: bool,
+        substeps: int,
+        meta: dict[str, Any] | None = None,
+        limit: RatioLimit | None = None,
+        precision: str = "float32",
+        tabulate: bool = True,
+    ) -> None:
         self.W = np.asarray(W, dtype=np.float64)  # (nu, d)
         self.b = np.asarray(b, dtype=np.float64)  # (nu,)
         self.A = np.asarray(A, dtype=np.float64)  # (nu + d, r)
@@ -69,11 +80,26 @@ class FlowField:
 
     def with_limit(self, limit: RatioLimit | None) -> FlowField:
         """The same learned field under another Lyapunov limit; reuses the tabulated ``f`` when the grid matches."""
-        out = FlowField(self.W, self.b, self.A, self.B, self.goal, self.goal_centred, self.substeps, meta=self.meta,
-                        limit=limit, precision=self.precision, tabulate=False)
+        out = FlowField(
+            self.W,
+            self.b,
+            self.A,
+            self.B,
+            self.goal,
+            self.goal_centred,
+            self.substeps,
+            meta=self.meta,
+            limit=limit,
+            precision=self.precision,
+            tabulate=False,
+        )
         old = self._table
-        if limit is not None and old is not None and np.array_equal(old.lo, limit.lo) and np.array_equal(
-                old.hi, limit.hi):
+        if (
+            limit is not None
+            and old is not None
+            and np.array_equal(old.lo, limit.lo)
+            and np.array_equal(old.hi, limit.hi)
+        ):
             out._table = _query_table(out, limit, f_values=old.values[..., : self.dim])
         elif limit is not None:
             out._table = _query_table(out, limit)
@@ -214,8 +240,10 @@ class FlowField:
         return batch
 
     def __repr__(self) -> str:
-        return (f"FlowField(dim={self.dim}, nu={self.nu}, rank={self.rank}, goal={self.goal.tolist()}, "
-                f"substeps={self.substeps}, goal_centred={self.goal_centred})")
+        return (
+            f"FlowField(dim={self.dim}, nu={self.nu}, rank={self.rank}, goal={self.goal.tolist()}, "
+            f"substeps={self.substeps}, goal_centred={self.goal_centred})"
+        )
 
 
 def load_field(path: str | Path) -> FlowField:
@@ -224,11 +252,23 @@ def load_field(path: str | Path) -> FlowField:
     limit = None
     if "limit_table" in weights:
         spec = meta["limit"]
-        limit = RatioLimit(lo=np.asarray(spec["lo"], float), hi=np.asarray(spec["hi"], float),
-                           table=weights["limit_table"], outside=float(spec["outside"]))
-    return FlowField(weights["W"], weights["b"], weights["A"], weights["B"], goal=np.asarray(meta["goal"]),
-                     goal_centred=bool(meta["goal_centred"]), substeps=int(meta["substeps"]), meta=meta,
-                     limit=limit)
+        limit = RatioLimit(
+            lo=np.asarray(spec["lo"], float),
+            hi=np.asarray(spec["hi"], float),
+            table=weights["limit_table"],
+            outside=float(spec["outside"]),
+        )
+    return FlowField(
+        weights["W"],
+        weights["b"],
+        weights["A"],
+        weights["B"],
+        goal=np.asarray(meta["goal"]),
+        goal_centred=bool(meta["goal_centred"]),
+        substeps=int(meta["substeps"]),
+        meta=meta,
+        limit=limit,
+    )
 
 
 #: Target node count of the query table by dimension (per axis: its d-th root, nested in the limit's grid).

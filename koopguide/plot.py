@@ -27,8 +27,17 @@ def plot_field(field: FlowField, demos: Demonstrations, output: Path, title: str
     gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], 60), np.linspace(lo[1], hi[1], 60))
     V = field.velocity(np.column_stack([gx.ravel(), gy.ravel()]))
     speed = np.linalg.norm(V, axis=1).reshape(gx.shape)
-    ax.streamplot(gx, gy, V[:, 0].reshape(gx.shape), V[:, 1].reshape(gx.shape), color=speed, cmap="Blues",
-                  density=1.3, linewidth=0.7, arrowsize=0.7)
+    ax.streamplot(
+        gx,
+        gy,
+        V[:, 0].reshape(gx.shape),
+        V[:, 1].reshape(gx.shape),
+        color=speed,
+        cmap="Blues",
+        density=1.3,
+        linewidth=0.7,
+        arrowsize=0.7,
+    )
 
     for i, traj in enumerate(demos.trajectories):
         ax.plot(traj[:, 0], traj[:, 1], color="0.2", lw=1.2, label="demonstrations" if i == 0 else None)
@@ -39,8 +48,14 @@ def plot_field(field: FlowField, demos: Demonstrations, output: Path, title: str
     starts = np.column_stack([sx.ravel(), sy.ravel()])
     paths = field.rollout(starts, 100 * field.substeps // 4, substeps=field.substeps // 4 or 1)
     for i, path in enumerate(paths):
-        ax.plot(path[:, 0], path[:, 1], color="tab:orange", lw=0.7, alpha=0.8,
-                label="rollouts from a grid of starts" if i == 0 else None)
+        ax.plot(
+            path[:, 0],
+            path[:, 1],
+            color="tab:orange",
+            lw=0.7,
+            alpha=0.8,
+            label="rollouts from a grid of starts" if i == 0 else None,
+        )
     ax.plot(starts[:, 0], starts[:, 1], "o", color="tab:orange", ms=2.5)
     ax.plot(*field.goal, marker="*", color="gold", mec="k", ms=16, ls="none", label="goal")
     ax.set_xlim(lo[0], hi[0])

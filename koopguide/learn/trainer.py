@@ -101,15 +101,19 @@ class TrainedField:
         """The numpy field this training produced (limited if it has a limit)."""
         if self.flow is not None:
             return self.flow
-        return FlowField(self.W, self.b, self.A, self.B, self.goal, self.goal_centred, self.substeps,
-                         limit=self.limit)
+        return FlowField(self.W, self.b, self.A, self.B, self.goal, self.goal_centred, self.substeps, limit=self.limit)
 
 
 ProgressFn = Callable[[int, int, dict[str, float]], None]
 
 
-def train(demos: demo_data.Demonstrations, cfg: TrainConfig, seed: int,
-          progress: ProgressFn | None = None, progress_every: int = 250) -> TrainedField:
+def train(
+    demos: demo_data.Demonstrations,
+    cfg: TrainConfig,
+    seed: int,
+    progress: ProgressFn | None = None,
+    progress_every: int = 250,
+) -> TrainedField:
     """Fit a flow field to ``demos``; deterministic for a given ``seed`` (and thread count)."""
     _check(cfg)
     if cfg.threads > 0:
@@ -170,8 +174,7 @@ def train(demos: demo_data.Demonstrations, cfg: TrainConfig, seed: int,
         if not math.isfinite(loss.item()):
             raise FloatingPointError(f"training diverged at step {k}: loss {loss.item()}")
         if progress is not None and (k % progress_every == 0 or k == steps):
-            terms = {"loss": loss.item(), "koopman": loss_k.item(), "state": loss_s.item(),
-                     "divergence": loss_d.item()}
+            terms = {"loss": loss.item(), "koopman": loss_k.item(), "state": loss_s.item(), "divergence": loss_d.item()}
             if loss_g is not None:
                 terms["goal"] = loss_g.item()
             if loss_m is not None:
@@ -203,9 +206,19 @@ def train(demos: demo_data.Demonstrations, cfg: TrainConfig, seed: int,
         "rho": spectral_radius(A, B),
         "torch_version": str(torch.__version__),
     }
-    return TrainedField(W=W, b=b, A=A, B=B, goal=demos.goal.copy(), goal_centred=cfg.model.goal_centred,
-                        substeps=cfg.subsample_every, info=info, limit=limit, certificate=cert,
-                        flow=limited)
+    return TrainedField(
+        W=W,
+        b=b,
+        A=A,
+        B=B,
+        goal=demos.goal.copy(),
+        goal_centred=cfg.model.goal_centred,
+        substeps=cfg.subsample_every,
+        info=info,
+        limit=limit,
+        certificate=cert,
+        flow=limited,
+    )
 
 
 class AdamW:
@@ -215,8 +228,14 @@ class AdamW:
     its per-step dispatch and first-use compiler import, which cost more than the math at these sizes.
     """
 
-    def __init__(self, params: list[torch.nn.Parameter], lr: float, weight_decay: float,
-                 betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8) -> None:
+    def __init__(
+        self,
+        params: list[torch.nn.Parameter],
+        lr: float,
+        weight_decay: float,
+        betas: tuple[float, float] = (0.9, 0.999),
+        eps: float = 1e-8,
+    ) -> None:
         self.params, self.lr, self.wd, self.betas, self.eps = params, lr, weight_decay, betas, eps
         self.m = [torch.zeros_like(p) for p in params]
         self.v = [torch.zeros_like(p) for p in params]
@@ -292,8 +311,12 @@ def _check(cfg: TrainConfig) -> None:
                 problems.append(f"convergence.{name} must be in ({lo}, {hi}), got {value}")
         if conv.enlarge > conv.table_enlarge:
             problems.append(f"convergence.enlarge {conv.enlarge} must not exceed table_enlarge {conv.table_enlarge}")
-        for name, value, lo, hi in (("table_nodes", conv.table_nodes, 16, 1 << 20), ("grid", conv.grid, 100, 2000),
-                                    ("learned_steps", conv.learned_steps, 1, 100000), ("repairs", conv.repairs, 0, 20)):
+        for name, value, lo, hi in (
+            ("table_nodes", conv.table_nodes, 16, 1 << 20),
+            ("grid", conv.grid, 100, 2000),
+            ("learned_steps", conv.learned_steps, 1, 100000),
+            ("repairs", conv.repairs, 0, 20),
+        ):
             if not lo <= value <= hi:
                 problems.append(f"convergence.{name} must be in [{lo}, {hi}], got {value}")
     if problems:

@@ -10,8 +10,9 @@ SMALL = "model:\n  nu: 256\n  rank: 16\noptim:\n  steps: 300\n"
 
 
 def koopguide(*args: str, cwd=None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "koopguide", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "koopguide", *args], capture_output=True, text=True, cwd=cwd, timeout=300
+    )
 
 
 @pytest.fixture(scope="module")
@@ -58,8 +59,9 @@ def test_uncertified_model_is_refused_unless_allowed(tmp_path):
     out = koopguide("train", "--lasa", "Sine", "-o", str(target), "--config", str(cfg), "--quiet")
     assert out.returncode == 2 and not target.exists()
     assert out.stderr.count("\n") == 1 and "refusing to write" in out.stderr and "--allow-uncertified" in out.stderr
-    out = koopguide("train", "--lasa", "Sine", "-o", str(target), "--config", str(cfg), "--quiet",
-                    "--allow-uncertified")
+    out = koopguide(
+        "train", "--lasa", "Sine", "-o", str(target), "--config", str(cfg), "--quiet", "--allow-uncertified"
+    )
     assert out.returncode == 0 and target.exists()
     assert "WARNING" in out.stderr and "UNCERTIFIED" in out.stderr
     ev = koopguide("eval", str(target), "--starts", "20")
@@ -71,6 +73,26 @@ def test_plot_writes_a_png(trained):
     out = koopguide("plot", str(tmp / "sine.pt"), "-o", str(tmp / "sine.png"))
     assert out.returncode == 0, out.stderr
     assert (tmp / "sine.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    out = koopguide("plot", str(tmp / "sine.pt"), "--eigenfunctions", "--count", "3", "-o", str(tmp / "eig.png"))
+    assert out.returncode == 0, out.stderr
+    assert (tmp / "eig.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_leading_eigenfunction_is_multiplied_by_its_eigenvalue_along_the_koopman_rollout(trained):
+    import numpy as np
+
+    from koopguide import load_field
+
+    tmp, _ = trained
+    field = load_field(tmp / "sine.pt")
+    X = np.random.default_rng(0).uniform(field.bounds[0], field.bounds[1], (20, 2))
+    lam, phi = field.eigenfunctions(X, count=2)
+    assert np.all(np.abs(lam) < 1.0) and abs(lam[0]) >= abs(lam[1])
+    # phi(K z) = lam phi(z): one step of the lifted linear system, read through the same eigenvector
+    z_next = field.lift(X) @ field.B @ (field.B.T @ field.A).T  # (B^T K z)^T = (B^T A B^T z)^T
+    lam_all, Y = np.linalg.eig((field.B.T @ field.A).T)
+    i = int(np.argmin(np.abs(lam_all - lam[0])))
+    np.testing.assert_allclose(z_next @ Y[:, i], lam[0] * phi[:, 0], rtol=1e-8, atol=1e-10)
 
 
 @pytest.mark.parametrize(

@@ -69,8 +69,9 @@ def test_eval_numbers_agree_with_independent_implementations(small_trained, zsha
             path.append(x.copy())
         reps.append(np.array(path))
     sea = np.mean([independent_sea(d, r) for d, r in zip(zshape.trajectories, reps, strict=True)])
-    dtwd = np.mean([dtw_python(d, r, step_pattern="symmetric1").distance
-                    for d, r in zip(zshape.trajectories, reps, strict=True)])
+    dtwd = np.mean(
+        [dtw_python(d, r, step_pattern="symmetric1").distance for d, r in zip(zshape.trajectories, reps, strict=True)]
+    )
     assert metrics["sea"] == pytest.approx(sea, rel=0.05)
     assert metrics["dtwd"] == pytest.approx(dtwd, rel=0.05)
     assert metrics["sea"] == pytest.approx(sea, rel=1e-9)  # in fact they agree to rounding

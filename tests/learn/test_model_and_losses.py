@@ -121,8 +121,9 @@ def test_xavier_bounds_as_reference():
 def test_multistep_training_path_runs_and_reports_its_term(zshape):
     from tests.learn.conftest import small_config
 
-    cfg = small_config(model={"nu": 64, "rank": 8}, optim={"steps": 20}, loss={"horizon": 4, "multistep": 0.5},
-                       convergence=None)
+    cfg = small_config(
+        model={"nu": 64, "rank": 8}, optim={"steps": 20}, loss={"horizon": 4, "multistep": 0.5}, convergence=None
+    )
     seen = []
     t = trainer.train(zshape, cfg, seed=0, progress=lambda k, n, terms: seen.append(terms), progress_every=10)
     assert len(seen) == 2 and all("multistep" in terms and terms["multistep"] > 0 for terms in seen)
