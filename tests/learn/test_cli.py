@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 SMALL = "model:\n  nu: 256\n  rank: 16\noptim:\n  steps: 300\n"
@@ -145,3 +146,25 @@ def test_train_on_user_csv_demos_in_3d(tmp_path):
     metrics = json.loads(out.stdout)
     assert metrics["sea"] is None  # SEA is 2-D only
     assert metrics["converged"] == 50 and metrics["goal_fixed_point_err"] == 0.0
+
+
+def test_helix_3d_trains_certifies_evaluates_and_plots(tmp_path):
+    from koopguide.synthetic import helix
+
+    demos = helix()
+    assert demos.dim == 3 and len(demos.trajectories) == 5
+    for traj in demos.trajectories:  # descends into the goal, starting and ending at rest
+        assert np.allclose(traj[-1], 0.0) and traj[0, 2] > 30.0 and np.all(np.diff(traj[:, 2]) <= 1e-12)
+        assert np.linalg.norm(traj[1] - traj[0]) < 1e-3 and np.linalg.norm(traj[-1] - traj[-2]) < 1e-3
+    cfg = tmp_path / "small.yaml"
+    cfg.write_text(SMALL)
+    model = tmp_path / "helix.pt"
+    out = koopguide("train", "--synthetic", "helix", "-o", str(model), "--config", str(cfg))
+    assert out.returncode == 0, out.stderr
+    assert "certificate  PASSED  (22x22x22 grid" in out.stderr  # >= 100^2 starts in 3-D
+    metrics = json.loads(koopguide("eval", str(model), "--json", "--starts", "100").stdout)
+    assert metrics["sea"] is None and metrics["dtwd"] > 0
+    assert metrics["converged"] == metrics["converged_euler"] == 100
+    assert metrics["certificate"]["learned"]["converged"] == 22**3
+    out = koopguide("plot", str(model), "-o", str(tmp_path / "helix.png"))
+    assert out.returncode == 0 and (tmp_path / "helix.png").read_bytes()[:4] == b"\x89PNG"
