@@ -93,6 +93,10 @@ def load_lasa(name: str) -> Demonstrations:
 def load_source(source: str | Path) -> Demonstrations:
     """Demonstrations by the source string a model file records: ``lasa:NAME`` or a path."""
     text = str(source)
+    if text.startswith("synthetic:"):
+        from koopguide.base.synthetic import load_synthetic
+
+        return load_synthetic(text[len("synthetic:") :])
     return load_lasa(text[len("lasa:"):]) if text.startswith("lasa:") else load_demos(text)
 
 
