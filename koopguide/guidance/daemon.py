@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from koopguide.base import config as config_io
+from koopguide.base.modelfile import ModelFileError
 from koopguide.guidance import events as ev
 from koopguide.guidance.estimation.clock import VehicleClock
 from koopguide.guidance.law.command import GuidanceLaw, GuidanceState
@@ -35,6 +36,7 @@ from koopguide.guidance.supervisor import Supervisor
 from koopguide.guidance.vehicle_events import VehicleEvents
 from koopguide.mavlink import rover
 from koopguide.mavlink.link import Link
+from koopguide.model.certificate import certificate_ok
 from koopguide.model.field import load_field
 
 log = logging.getLogger(__name__)
@@ -132,7 +134,14 @@ class GuidanceDaemon:
     @classmethod
     async def create(cls, cfg: GuidanceConfig, model_path: Path, zenoh_config: Any | None = None) -> GuidanceDaemon:
         """Refuse a bad model or config (ValueError) before opening anything; then open MAVLink and zenoh."""
-        law = GuidanceLaw.from_config(load_field(model_path), cfg)
+        field = load_field(model_path)
+        certified, why = certificate_ok(field)
+        if not certified:
+            if not cfg.allow_uncertified:
+                raise ModelFileError(f"{model_path}: {why}; refusing to guide with it (allow_uncertified: true to "
+                                     f"override)")
+            log.warning("UNCERTIFIED MODEL %s: %s; guiding anyway (allow_uncertified)", model_path, why)
+        law = GuidanceLaw.from_config(field, cfg)
         daemon = cls(cfg, Path(model_path), law)
         log.info(
             "model %s: domain max field speed %.4g units/step -> %.3f m/s (gain %.4g)",
