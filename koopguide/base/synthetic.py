@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from koopguide.base.data import Demonstrations
+from koopguide.base.demonstrations import Demonstrations
 
 SYNTHETIC = ("helix",)
 

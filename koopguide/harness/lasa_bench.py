@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
-import statistics
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -19,9 +17,9 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from koopguide.base import data
+from koopguide.harness.lasa_report import write_report
 from koopguide.model.edmd import edmd_field
 
-PAPER = {"sea": (169.0, 74.0), "dtwd": (1595.0, 537.0)}  # KoopMotion, 30 LASA shapes, nu = 1000
 ABLATIONS: dict[str, dict] = {
     **{f"nu={nu}": {"model": {"nu": nu}} for nu in (128, 256, 512, 1024, 2048)},
     "no divergence term": {"loss": {"divergence": 0.0}},
@@ -155,18 +153,10 @@ def main(argv: list[str] | None = None) -> int:
         "cpus": os.cpu_count(),
     }
     (args.output / "results.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
-    from koopguide.harness.lasa_report import write_report
 
     write_report(args.output, rows, meta, models=args.models)
     print(f"wrote {args.output / 'report.md'}; main runs {main_wall:.0f} s wall, everything {wall:.0f} s")
     return 0
-
-
-def mean_std(values: list[float]) -> tuple[float, float]:
-    vals = [v for v in values if v is not None and math.isfinite(v)]
-    if not vals:
-        return float("nan"), float("nan")
-    return statistics.fmean(vals), (statistics.stdev(vals) if len(vals) > 1 else 0.0)
 
 
 def _f(v: float | None) -> str:

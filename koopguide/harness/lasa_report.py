@@ -6,13 +6,23 @@ Array conventions: LASA units; rows as produced by :func:`koopguide.harness.lasa
 from __future__ import annotations
 
 import math
+import statistics
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
 from koopguide.base import data
-from koopguide.harness.lasa_bench import PAPER, mean_std
+
+PAPER = {"sea": (169.0, 74.0), "dtwd": (1595.0, 537.0)}  # KoopMotion, 30 LASA shapes, nu = 1000
+
+
+def mean_std(values: list[float]) -> tuple[float, float]:
+    vals = [v for v in values if v is not None and math.isfinite(v)]
+    if not vals:
+        return float("nan"), float("nan")
+    return statistics.fmean(vals), (statistics.stdev(vals) if len(vals) > 1 else 0.0)
+
 
 
 def _per_shape(rows: list[dict], label: str) -> dict[str, list[dict]]:
