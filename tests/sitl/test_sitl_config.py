@@ -20,25 +20,11 @@ from koopguide.base.config import ConfigError
 from sitl import config as sitl_config
 from sitl.config import AutopilotParams, SitlConfig
 from sitl.parameters import PARAMS, ParamStore
+from tests.support.config_paths import leaf_paths, nested
 
 SITL_DEFAULTS = config.load_yaml(config.default_config_path("sitl"))
 
 
-def leaf_paths(data: dict[str, Any], prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
-    out = []
-    for key, value in data.items():
-        if isinstance(value, dict):
-            out += leaf_paths(value, (*prefix, key))
-        else:
-            out.append((*prefix, key))
-    return out
-
-
-def nested(path: tuple[str, ...], value: Any) -> dict[str, Any]:
-    out: Any = value
-    for key in reversed(path):
-        out = {key: out}
-    return out
 
 
 def load_text(tmp_path: Path, text: str) -> SitlConfig:
