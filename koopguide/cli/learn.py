@@ -56,10 +56,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks that print figures (never timed tests)")
     p.add_argument(
         "what",
-        choices=["speed", "lasa", "sitl", "guidance", "missions"],
+        choices=["speed", "lasa", "sitl", "guidance", "missions", "soak"],
         help="speed: training and query speed; lasa: all LASA shapes, seeds, ablations and a report; "
         "sitl: simulator; guidance: service latency and CPU; missions: closed-loop campaign of vehicles x flows "
-        "x starts",
+        "x starts; soak: hours of guidance at 50 Hz, memory and latency growth",
     )
     p.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the benchmark")
     p.set_defaults(run=cmd_bench)
@@ -219,6 +219,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from sitl import bench as sitl_bench
 
         return sitl_bench.main(args.rest)
+    if args.what == "soak":
+        from koopguide.harness import soak
+
+        return soak.main(args.rest)
     if args.what == "missions":
         from koopguide.harness import campaign
 
