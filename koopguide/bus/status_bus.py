@@ -5,8 +5,8 @@ Keys for vehicle ``<id>`` (docs/zenoh.md):
 ``koopguide/<id>/status``   publisher; one JSON status per :meth:`StatusBus.publish` (schema: ``status``)
 ``koopguide/<id>/alive``    liveliness token, present while the bus is open
 ``koopguide/<id>/field``    queryable; the selector's parameters (``?n=30``) go to ``sample_field`` as a
-                            dict of strings, the reply is its result as JSON; a ValueError it raises
-                            becomes an error reply carrying the message
+                            dict of strings; it answers JSON bytes (awaited: the service computes them in
+                            a worker process); a ValueError it raises becomes an error reply
 ``koopguide/<id>/config``   queryable; the reply is ``config_snapshot()`` as JSON
 
 Zenoh is optional for guidance: if the session cannot be opened or an entity cannot be declared,
@@ -16,8 +16,8 @@ nothing. A failing put is logged once per outage, never per cycle.
 Threads: no Python callback is handed to zenoh (a callback left declared keeps a thread alive and
 hangs the process at exit). Queries arrive in zenoh ring channels and a task on the event loop
 drains them every :data:`QUERY_POLL_S`. ``config_snapshot`` is cheap and runs on the event loop;
-``sample_field`` (up to 100 x 100 field evaluations and their JSON) runs on a worker thread, one query
-at a time, so a field query never holds up the control loop.
+``sample_field`` is awaited, one query at a time, and does its heavy work off the loop (the service's
+:mod:`koopguide.guidance.field_grid`), so a field query never holds up the control loop.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import asyncio
 import contextlib
 import json
 import logging
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -46,7 +46,7 @@ QUERY_POLL_S = 0.02
 #: Queries waiting beyond this many per queryable are dropped, oldest first (the asker sees no reply).
 QUERY_BACKLOG = 16
 
-SampleField = Callable[[dict[str, str]], dict]
+SampleField = Callable[[dict[str, str]], Awaitable[bytes]]
 ConfigSnapshot = Callable[[], dict]
 
 
@@ -172,14 +172,27 @@ class StatusBus:
     async def _serve_queries(self) -> None:
         while (declared := self._declared) is not None:
             while (query := declared.field_queryable.try_recv()) is not None:
-                # off the event loop: the answer costs milliseconds of numpy and JSON (cached per grid)
-                await asyncio.to_thread(_reply_and_drop, query, self.keys.field, self._field_reply)
+                await self._answer_field(query)
             while (query := declared.config_queryable.try_recv()) is not None:
                 _reply_and_drop(query, self.keys.config, self._config_reply)
             await asyncio.sleep(QUERY_POLL_S)
 
-    def _field_reply(self, query: zenoh.Query) -> Any:
-        return self._sample_field(dict(query.parameters))
+    async def _answer_field(self, query: zenoh.Query) -> None:
+        try:
+            try:
+                payload = await self._sample_field(dict(query.parameters))
+            except ValueError as exc:  # the asker's parameters are wrong: tell them
+                query.reply_err(str(exc), encoding=zenoh.Encoding.TEXT_PLAIN)
+                return
+            except Exception as exc:  # a bug in the service's callback: answer, log, keep serving
+                logger.exception("answering a query on %s failed", self.keys.field)
+                query.reply_err(f"internal error: {type(exc).__name__}: {exc}", encoding=zenoh.Encoding.TEXT_PLAIN)
+                return
+            query.reply(self.keys.field, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
+        except zenoh.ZError as exc:  # the asker left, or the session is closing
+            logger.debug("could not reply to a query on %s: %s", self.keys.field, zenoh_error_text(exc))
+        finally:
+            query.drop()  # tells the asker that no more replies follow
 
     def _config_reply(self, _query: zenoh.Query) -> Any:
         return self._config_snapshot()

@@ -29,6 +29,7 @@ from koopguide.base import config as config_io
 from koopguide.base.modelfile import ModelFileError
 from koopguide.guidance import events as ev
 from koopguide.guidance.estimation.clock import VehicleClock
+from koopguide.guidance.field_grid import FieldGrids
 from koopguide.guidance.law.command import GuidanceLaw, GuidanceState
 from koopguide.guidance.link import open_link
 from koopguide.guidance.settings import ExitMode, GuidanceConfig
@@ -75,6 +76,7 @@ class GuidanceDaemon:
         self.cfg = cfg
         self.model_path = model_path
         self.law = law
+        self.field_grids = FieldGrids(model_path, cfg)  # the field queryable's grids, off the loop
         self.target = (cfg.mavlink.target_system, cfg.mavlink.target_component)
         self.period = 1.0 / cfg.command.rate_hz  # vehicle seconds between setpoints
         self.clock = VehicleClock(window_s=cfg.limits.clock_window_s, confirm=cfg.limits.clock_confirm)
@@ -182,10 +184,13 @@ class GuidanceDaemon:
                 await self.close()
 
     async def close(self) -> None:
-        if self.link is not None:
-            await self.link.close()
-        if self.bus is not None:
-            await self.bus.close()
+        try:
+            if self.link is not None:
+                await self.link.close()
+            if self.bus is not None:
+                await self.bus.close()
+        finally:
+            self.field_grids.close()
 
     async def _shutdown(self) -> None:
         """Zero velocity (at the current heading), then the exit mode (only if still in GUIDED)."""
@@ -355,8 +360,8 @@ class GuidanceDaemon:
                      "wrong_source": link.wrong_source, "source_changes": link.source_changes} if link else None,
         }
 
-    def sample_field(self, params: dict[str, str]) -> dict[str, Any]:
-        """The field on a grid in NED for the ``field`` queryable; ``n`` = grid points per axis."""
+    async def sample_field(self, params: dict[str, str]) -> bytes:
+        """The field on a grid in NED for the ``field`` queryable (JSON bytes); ``n`` = grid points per axis."""
         text = params.get("n", str(self.cfg.status.field_grid))
         try:
             n = int(text)
@@ -366,7 +371,7 @@ class GuidanceDaemon:
             raise ValueError(f"field query: n must be 2 .. 200, got {n}")
         if not self.supervisor.goal_placed:
             raise ValueError("field query: the geodetic goal is not placed yet (no GLOBAL_POSITION_INT so far)")
-        return self.law.sample_grid(n)
+        return await self.field_grids.encoded(n, self.law.frame)
 
     def config_snapshot(self) -> dict[str, Any]:
         return {

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import socket
 import threading
 import time
@@ -67,11 +68,12 @@ async def async_wait_for(predicate: Callable[[], Any], within: float = 5.0) -> A
     pytest.fail(f"condition not met within {within} s")
 
 
-def field_sampler(params: dict[str, str]) -> dict:
+async def field_sampler(params: dict[str, str]) -> bytes:
+    """A stand-in for the service's field queryable: a small JSON grid, or a ValueError for a bad ``n``."""
     n = int(params.get("n", "3"))
     if not 2 <= n <= 50:
         raise ValueError(f"grid size n must be 2..50, got {n}")
-    return {"n": n, "north": [float(i) for i in range(n)], "params": params}
+    return json.dumps({"n": n, "north": [float(i) for i in range(n)], "params": params}).encode()
 
 
 def config_snapshot() -> dict:

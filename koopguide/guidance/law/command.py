@@ -54,7 +54,6 @@ PURSUIT_STEPS = 4  # streamline steps per look-ahead (field evaluations per setp
 CRAB_MIN_SPEED_MPS = 0.002  # the smallest crabbed setpoint: it carries the heading into the current [m/s]
 CURRENT_MIN_MPS = 0.005  # a current estimate below this is no reason to slow the approach [m/s]
 GRID_CHUNK = 1024  # field evaluations at a time when sampling a grid (bounds the lifted batch's memory)
-GRID_CACHE_SIZE = 4  # sampled grids kept (per size and placement)
 
 
 @dataclass(frozen=True)
@@ -101,7 +100,6 @@ class GuidanceLaw:
         self.domain_lo, self.domain_hi = lo - pad, hi + pad  # the model's domain [model units]
         self.v_max = max_field_speed(field, self.domain_lo, self.domain_hi, command.speed_grid)
         self.gain = command.max_speed_mps / self.v_max  # m/s per (model unit / learned step)
-        self._grid_cache: dict[tuple[int, ModelFrame], dict] = {}
 
     @classmethod
     def from_config(cls, field: FlowField, cfg: GuidanceConfig) -> GuidanceLaw:
@@ -261,14 +259,11 @@ class GuidanceLaw:
         return d if float(np.hypot(*d)) > 1e-12 else self.frame.direction_to_ned(v0)
 
     def sample_grid(self, n: int) -> dict:
-        """The field over the domain on an ``n x n`` grid, in NED (for dashboards): JSON-ready. Cached per
-        grid size and placement (a few entries); evaluated in chunks, so memory stays bounded for any ``n``."""
-        key = (n, self.frame)
-        if key in self._grid_cache:
-            return self._grid_cache[key]
+        """The field over the domain on an ``n x n`` grid, in NED (for dashboards): JSON-ready; evaluated in
+        chunks, so memory stays bounded for any ``n``."""
         P = self.frame.to_ned(box_grid(self.domain_lo, self.domain_hi, n))
         V = np.concatenate([self.field_velocity_ned(P[i : i + GRID_CHUNK]) for i in range(0, len(P), GRID_CHUNK)])
-        grid = {
+        return {
             "frame": "local_ned",
             "units": {"position_ned": "m", "velocity_ned": "m/s"},
             "n": n,
@@ -276,10 +271,6 @@ class GuidanceLaw:
             "position_ned": np.round(P, 4).tolist(),
             "velocity_ned": np.round(V, 5).tolist(),
         }
-        if len(self._grid_cache) >= GRID_CACHE_SIZE:
-            self._grid_cache.pop(next(iter(self._grid_cache)))
-        self._grid_cache[key] = grid
-        return grid
 
 
 def crab(v_ground: np.ndarray, current_ned: np.ndarray, glide_limit_rad: float = math.pi / 2) -> np.ndarray:
