@@ -335,8 +335,8 @@ def test_a_failing_callback_gives_an_error_reply_and_the_bus_keeps_serving(caplo
     port = free_port()
     asker = zenoh.open(default_zenoh_config(port))
 
-    def broken_sampler(params: dict[str, str]) -> dict:
-        return {"n": params["missing"]}  # KeyError: a bug in the daemon, not the asker's fault
+    async def broken_sampler(params: dict[str, str]) -> bytes:
+        return json.dumps({"n": params["missing"]}).encode()  # KeyError: a bug in the daemon, not the asker's
 
     async def ask(selector: str) -> list[zenoh.Reply]:
         deadline = time.monotonic() + 5.0
