@@ -1,5 +1,5 @@
 """``koopguide run --log``: the service's own mission log, from a mission flown against the real simulator
-(speed-up 20), read back with the mcap reader and ``read_mission``, and rendered with ``koopguide replay``.
+(speed-up 10), read back with the mcap reader and ``read_mission``, and rendered with ``koopguide replay``.
 Conventions: local NED [m], [m/s]; vehicle seconds."""
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from koopguide.harness import mission
 def logged(tmp_path_factory: pytest.TempPathFactory, zshape_model: Path):
     """One mission from Zshape's first start in a 0.02 m/s current, logged; (cfg, result, log path)."""
     path = tmp_path_factory.mktemp("log") / "mission.mcap"
-    cfg, sim_cfg, _pose = mission.demo_mission(zshape_model, 0, 0.02, 20.0, vehicle_id="boat8")
+    cfg, sim_cfg, _pose = mission.demo_mission(zshape_model, 0, 0.02, 10.0, vehicle_id="boat8")
     result = asyncio.run(mission.fly(cfg, zshape_model, sim_cfg, 120.0, settle_s=3.0, log_path=path))
     assert result.arrived
     return cfg, result, path
@@ -58,12 +58,15 @@ def test_the_log_holds_every_fix_setpoint_state_change_and_status_of_the_mission
     assert np.isfinite(estimates[-1, 5:7]).all()
     # each setpoint sent: at the command rate, never above the speed limit, the largest one as the service saw
     speeds = np.hypot(setpoints[:, 1], setpoints[:, 2])
-    assert len(setpoints) >= 0.8 * span * cfg.command.rate_hz
+    t_guiding = next(t for t, s in result.transitions if s == "guiding")
+    t_arrived = next(t for t, s in result.transitions if s == "arrived")
+    guiding = setpoints[(setpoints[:, 0] >= t_guiding) & (setpoints[:, 0] < t_arrived)]
+    assert len(guiding) >= 0.8 * (t_arrived - t_guiding) * cfg.command.rate_hz  # the command rate while guiding
     assert float(speeds.max()) == pytest.approx(result.max_setpoint_mps, abs=1e-9)
     assert float(speeds.max()) <= cfg.command.max_speed_mps + 1e-9
     # state changes: exactly the service's transitions, with the latest reason
     assert [(t, s) for t, s, _ in record.states] == [(pytest.approx(t), s) for t, s in result.transitions]
-    assert [s for _, s, _ in record.states][-1] == "arrived"
+    assert "arrived" in [s for _, s, _ in record.states] and all(reason for _, _, reason in record.states)
     # statuses at status.rate_hz (wall) with growing seq; the last one at the goal
     seqs = [s["seq"] for s in record.statuses]
     assert len(seqs) >= 10 and seqs == sorted(set(seqs))
