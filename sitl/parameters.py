@@ -1,68 +1,52 @@
 """The autopilot's parameters under their ArduPilot Rover names, each with the range it accepts.
 
-PARAM_SET of a value outside its range, or of NaN/inf, changes nothing (the reply is the PARAM_VALUE
-in force, as ArduPilot answers). The same ranges check the configuration at load. Ranges follow
-ArduPilot's documented ``@Range`` where that makes sense for a 0.4 m boat, widened for the gains (this
-simulator's defaults are tuned for its miniature hull, not for ArduPilot's defaults), and narrowed
-where a value would make the controller divide by zero or drive astern (WP_SPEED >= 0,
-ATC_STR_RAT_MAX > 0).
+The one source is :class:`sitl.config.AutopilotParams`: each field's type declares its interval and its
+metadata the ArduPilot name (and whether it is an enumeration, whole numbers only); :data:`PARAMS` is
+built from those fields, in their order (the PARAM_VALUE index). So the configuration, checked while
+loading, and PARAM_SET, checked here at run time, accept exactly the same values. PARAM_SET of a value
+outside its range, or of NaN/inf, changes nothing (the reply is the PARAM_VALUE in force, as ArduPilot
+answers).
 """
 
 from __future__ import annotations
 
-import math
+import dataclasses
 import struct
+import typing
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
-from koopguide.base.config import ConfigError
-
-if TYPE_CHECKING:
-    from sitl.config import AutopilotParams
+from koopguide.base.config import Range
+from sitl.config import AutopilotParams
 
 
 @dataclass(frozen=True)
 class ParamSpec:
     field: str  # AutopilotParams field
-    low: float  # smallest accepted value (inclusive unless low_open) [the parameter's unit]
-    high: float  # largest accepted value (inclusive) [the parameter's unit]
-    low_open: bool = False  # the low end itself is not accepted
+    interval: Range  # accepted values [the parameter's unit]
     integer: bool = False  # only whole numbers (an enumeration)
 
     def accepts(self, value: float) -> bool:
-        if not math.isfinite(value) or value > self.high:
-            return False
-        if value < self.low or (self.low_open and value == self.low):
-            return False
-        return not self.integer or value == round(value)
+        """``value`` is finite, in the interval, and whole if the parameter is an enumeration."""
+        return self.interval.contains(value) and (not self.integer or value == round(value))
 
     def describe(self) -> str:
-        bracket = "(" if self.low_open else "["
+        """The accepted values, short for a STATUSTEXT: ``[0, 100]``, ``(0, 10]``, ``whole numbers in [0, 2]``."""
+        r = self.interval
         kind = "whole numbers in " if self.integer else ""
-        return f"{kind}{bracket}{self.low:g}, {self.high:g}]"
+        return f"{kind}{'(' if r.lo_open else '['}{r.lo:g}, {r.hi:g}{')' if r.hi_open else ']'}"
 
 
-# ArduPilot name -> field and range; the order is the PARAM_VALUE index.
-PARAMS = {
-    "GUID_TIMEOUT": ParamSpec("guid_timeout_s", 0.1, 5.0),  # [s]
-    "WP_SPEED": ParamSpec("wp_speed_mps", 0.0, 100.0),  # [m/s]
-    "CRUISE_SPEED": ParamSpec("cruise_speed_mps", 0.0, 100.0),  # [m/s]; 0 = no feed-forward
-    "CRUISE_THROTTLE": ParamSpec("cruise_throttle_pct", 0.0, 100.0),  # [%]
-    "ATC_SPEED_P": ParamSpec("speed_p", 0.0, 100.0),  # [1/(m/s)]
-    "ATC_SPEED_I": ParamSpec("speed_i", 0.0, 100.0),  # [1/m]
-    "ATC_STR_RAT_FF": ParamSpec("steer_rate_ff", 0.0, 100.0),  # [1/(rad/s)]
-    "ATC_STR_RAT_P": ParamSpec("steer_rate_p", 0.0, 100.0),  # [1/(rad/s)]
-    "ATC_STR_RAT_I": ParamSpec("steer_rate_i", 0.0, 100.0),  # [1/rad]
-    "ATC_STR_RAT_MAX": ParamSpec("steer_rate_max_degps", 0.0, 1000.0, low_open=True),  # [deg/s]
-    "ATC_STR_ANG_P": ParamSpec("steer_angle_p", 0.0, 100.0),  # [1/s]
-    "WP_PIVOT_ANGLE": ParamSpec("pivot_angle_deg", 0.0, 360.0),  # [deg]; 0 = no pivot turns
-    "WP_PIVOT_RATE": ParamSpec("pivot_rate_degps", 0.0, 1000.0, low_open=True),  # [deg/s]
-    "WP_RADIUS": ParamSpec("wp_radius_m", 0.0, 1000.0),  # [m]
-    "LOIT_RADIUS": ParamSpec("loiter_radius_m", 0.0, 20.0),  # [m]
-    "LOIT_SPEED_GAIN": ParamSpec("loiter_speed_gain", 0.0, 5.0),  # [1/s]
-    "LOIT_TYPE": ParamSpec("loiter_type", 0.0, 2.0, integer=True),  # [-] 0 both ways, 1 forward, 2 reverse
-    "ATC_DECEL_MAX": ParamSpec("decel_max_mps2", 0.0, 10.0, low_open=True),  # [m/s^2]
-}
+def _specs() -> dict[str, ParamSpec]:
+    hints = typing.get_type_hints(AutopilotParams, include_extras=True)
+    specs = {}
+    for f in dataclasses.fields(AutopilotParams):
+        (interval,) = (m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, Range))
+        specs[f.metadata["ardupilot"]] = ParamSpec(f.name, interval, integer=f.metadata["integer"])
+    return specs
+
+
+#: ArduPilot name -> field and range; the order (AutopilotParams' field order) is the PARAM_VALUE index.
+PARAMS: dict[str, ParamSpec] = _specs()
 
 
 def float32(value: float) -> float:
@@ -90,11 +74,3 @@ class ParamStore:
 
     def __contains__(self, name: object) -> bool:
         return name in self._values
-
-
-def check_config_params(params: AutopilotParams) -> None:
-    """Raise ConfigError naming the first configured parameter outside its range."""
-    for name, spec in PARAMS.items():
-        value = getattr(params, spec.field)
-        if not spec.accepts(value):
-            raise ConfigError(f"autopilot.params.{spec.field} ({name}): must be {spec.describe()}, got {value!r}")

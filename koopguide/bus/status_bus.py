@@ -1,6 +1,6 @@
 """A daemon's zenoh presence: status publisher, liveliness token and two queryables, one session.
 
-Keys for vehicle ``<id>`` (DESIGN.md, "Zenoh status"):
+Keys for vehicle ``<id>`` (docs/zenoh.md):
 
 ``koopguide/<id>/status``   publisher; one JSON status per :meth:`StatusBus.publish` (schema: ``status``)
 ``koopguide/<id>/alive``    liveliness token, present while the bus is open

@@ -25,11 +25,14 @@ from typing import Any
 
 import zenoh
 
-from koopguide.base.config import ConfigError
 from koopguide.bus import control
-from koopguide.bus.monitor import ALIVE_KEYS, CHANNEL_CAPACITY, STATUS_KEYS, MonitorState, VehicleView, vehicle_id_of
+from koopguide.bus.monitor import (
+    MonitorState,
+    VehicleView,
+    open_watch,
+    vehicle_id_of,
+)
 from koopguide.bus.streamlines import FieldGrid, streamlines
-from koopguide.bus.zenoh_config import zenoh_error_text
 
 log = logging.getLogger(__name__)
 
@@ -89,19 +92,7 @@ class FleetHub:
     @classmethod
     def open(cls, zenoh_config: zenoh.Config) -> FleetHub:
         """Open the session and subscribe; a session zenoh refuses to open is a ConfigError."""
-        try:
-            session = zenoh.open(zenoh_config)
-        except zenoh.ZError as exc:
-            raise ConfigError(f"cannot open a zenoh session with this configuration: {zenoh_error_text(exc)}") from None
-        try:
-            statuses = session.declare_subscriber(STATUS_KEYS, zenoh.handlers.RingChannel(CHANNEL_CAPACITY))
-            liveliness = session.liveliness().declare_subscriber(
-                ALIVE_KEYS, zenoh.handlers.RingChannel(CHANNEL_CAPACITY), history=True
-            )
-        except BaseException:
-            session.close()
-            raise
-        return cls(session, statuses, liveliness)
+        return cls(*open_watch(zenoh_config))
 
     def close(self) -> None:
         try:

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from koopguide.base import config as config_io
+from koopguide.base.modelfile import ModelFileError
 from koopguide.guidance import events as ev
 from koopguide.guidance.estimation.clock import VehicleClock
 from koopguide.guidance.latency import LatencyWindow
@@ -37,6 +38,7 @@ from koopguide.guidance.supervisor import Supervisor
 from koopguide.guidance.vehicle_events import VehicleEvents
 from koopguide.mavlink import rover
 from koopguide.mavlink.link import Link
+from koopguide.model.certificate import certificate_ok
 from koopguide.model.field import load_field
 
 log = logging.getLogger(__name__)
@@ -114,7 +116,14 @@ class GuidanceDaemon:
     ) -> GuidanceDaemon:
         """Refuse a bad model, config or token file (ValueError) before opening anything; then open the
         mission log (``log_path``), MAVLink and zenoh."""
-        law = GuidanceLaw.from_config(load_field(model_path), cfg)
+        field = load_field(model_path)
+        certified, why = certificate_ok(field)
+        if not certified:
+            if not cfg.allow_uncertified:
+                raise ModelFileError(f"{model_path}: {why}; refusing to guide with it (allow_uncertified: true to "
+                                     f"override)")
+            log.warning("UNCERTIFIED MODEL %s: %s; guiding anyway (allow_uncertified)", model_path, why)
+        law = GuidanceLaw.from_config(field, cfg)
         token_file = cfg.status.control_token_file
         daemon = cls(cfg, Path(model_path), law, None if token_file is None else load_token(token_file))
         log.info(

@@ -173,6 +173,7 @@ class StatusSettings:
 class GuidanceConfig:
     vehicle_id: str
     arm: bool
+    allow_uncertified: bool  # guide with a model that failed or lacks its convergence certificate (warned)
     mavlink: MavlinkSettings
     frame: FrameSettings
     command: CommandSettings

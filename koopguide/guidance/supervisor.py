@@ -275,7 +275,7 @@ class Supervisor:
         if self.degraded:
             wanted = self.station.update(now, error)
             speed = float(np.hypot(*wanted))
-            floor = cfg.arrival.min_approach_mps
+            floor = cfg.command.min_speed_mps  # the fallback keeps way: a rudder boat cannot turn without it
             if 1e-12 < speed < floor:
                 wanted = wanted * (floor / speed)
             v = law.steer(wanted, heading, current, floor)

@@ -73,30 +73,36 @@ def reproduce(field: FlowField, demos: Demonstrations) -> list[np.ndarray]:
 
 
 def convergence_box(demos_bounds: tuple[np.ndarray, np.ndarray], enlarge: float) -> tuple[np.ndarray, np.ndarray]:
-    """The demonstrations' bounding box, each side ``1 + enlarge`` times as long, same centre."""
-    lo, hi = demos_bounds
-    centre, half = (lo + hi) / 2.0, (hi - lo) / 2.0 * (1.0 + enlarge)
-    return centre - half, centre + half
+    """The demonstrations' bounding box with each side moved out by ``enlarge`` of its length."""
+    lo, hi = (np.asarray(v, dtype=np.float64) for v in demos_bounds)
+    return lo - enlarge * (hi - lo), hi + enlarge * (hi - lo)
 
 
 @dataclass(frozen=True)
 class ConvergenceResult:
     converged: int  # starts that end within `tolerance` of the goal
     starts: int
-    final_distance_max: float  # worst final distance to the goal
+    final_distance_max: float  # worst final distance to the goal (model units; a bound if exited early)
     final_distance_median: float
 
 
-def convergence(field: FlowField, box: tuple[np.ndarray, np.ndarray], starts: int, steps: int,
-                tolerance: float, seed: int) -> ConvergenceResult:
-    """Uniform random starts in ``box`` iterated ``steps`` learned steps (re-lifted each step)."""
+def convergence(
+    field: FlowField,
+    box: tuple[np.ndarray, np.ndarray],
+    starts: int,
+    steps: int,
+    tolerance: float,
+    seed: int,
+    integrator: str = "learned",
+) -> ConvergenceResult:
+    """Uniform random starts in ``box``: ``steps`` learned steps (``integrator="learned"``) or
+    ``steps * substeps`` Euler steps of ``velocity / substeps`` (``"euler"``), re-lifted each step."""
+    from koopguide.model.certificate import run_to_goal
+
     lo, hi = box
     rng = np.random.default_rng(seed)
     X = lo + (hi - lo) * rng.random((starts, field.dim))
-    for _ in range(steps):
-        X = field.step(X)
-    dist = np.linalg.norm(X - field.goal, axis=1)
-    dist = np.where(np.isfinite(dist), dist, np.inf)
+    dist, _ = run_to_goal(field, X, integrator, steps, tolerance)
     return ConvergenceResult(int(np.sum(dist <= tolerance)), starts, float(np.max(dist)), float(np.median(dist)))
 
 
@@ -113,14 +119,23 @@ def nearest_fixed_point_error(field: FlowField, iterations: int = 2000) -> float
     return float(np.linalg.norm(x - field.goal))
 
 
-def evaluate(field: FlowField, demos: Demonstrations, *, starts: int = 500, steps: int = 100,
-             tolerance: float = 1.0, enlarge: float = 0.10, seed: int = 0) -> dict:
+def evaluate(
+    field: FlowField,
+    demos: Demonstrations,
+    *,
+    starts: int = 500,
+    steps: int = 100,
+    tolerance: float = 1.0,
+    enlarge: float = 0.10,
+    seed: int = 0,
+) -> dict:
     """All metrics as plain data (the JSON of ``koopguide eval --json``)."""
     reps = reproduce(field, demos)
     sea = [swept_error_area(d, r) for d, r in zip(demos.trajectories, reps, strict=True)] if field.dim == 2 else []
     dtwd = [dtw_distance(d, r) for d, r in zip(demos.trajectories, reps, strict=True)]
     box = convergence_box(demos.bounds, enlarge)
     conv = convergence(field, box, starts, steps, tolerance, seed)
+    conv_e = convergence(field, box, starts, steps, tolerance, seed, integrator="euler")
     final_err = [float(np.linalg.norm(r[-1] - demos.goal)) for r in reps]
     return {
         "sea": float(np.mean(sea)) if sea else None,
@@ -133,6 +148,8 @@ def evaluate(field: FlowField, demos: Demonstrations, *, starts: int = 500, step
         "convergence_tolerance": tolerance,
         "convergence_box": [box[0].tolist(), box[1].tolist()],
         "final_distance_max": conv.final_distance_max,
+        "converged_euler": conv_e.converged,
+        "final_distance_max_euler": conv_e.final_distance_max,
         "reproduction_end_error_max": max(final_err),
         "rho": field.spectral_radius(),
         "goal_fixed_point_err": goal_fixed_point_error(field),

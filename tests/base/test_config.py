@@ -14,25 +14,11 @@ from hypothesis import strategies as st
 from koopguide.base import config
 from koopguide.base.config import ConfigError
 from koopguide.guidance import settings as guidance_settings
+from tests.support.config_paths import leaf_paths, nested
 
 GUIDANCE_DEFAULTS = config.load_yaml(config.default_config_path("guidance"))
 
 
-def leaf_paths(data: dict[str, Any], prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
-    out = []
-    for key, value in data.items():
-        if isinstance(value, dict):
-            out += leaf_paths(value, (*prefix, key))
-        else:
-            out.append((*prefix, key))
-    return out
-
-
-def nested(path: tuple[str, ...], value: Any) -> dict[str, Any]:
-    out: Any = value
-    for key in reversed(path):
-        out = {key: out}
-    return out
 
 
 def test_yaml_numbers_are_read_the_yaml_1_2_way(tmp_path: Path):
@@ -71,6 +57,7 @@ def test_a_range_is_closed_or_open_as_declared():
     r = config.Range(0.0, 1.0, lo_open=True)
     assert not r.contains(0.0) and r.contains(1.0) and r.contains(0.5)
     assert not r.contains(math.nan) and not config.FINITE.contains(math.inf)
+    assert not config.FINITE.contains(10**400)  # no OverflowError: simply out of range
     assert str(r) == "a number in (0, 1]" and str(config.POSITIVE) == "a finite number > 0"
 
 

@@ -31,7 +31,8 @@ from koopguide.harness.mission import demo_start_pose, free_udp_port
 from koopguide.model.field import load_field
 from koopguide.model.learn import trainer
 from koopguide.model.learn.export import save
-from tests.learn.conftest import small_config
+from tests.support.models import small_config
+from tests.support.processes import stop_process
 
 REPO = Path(__file__).resolve().parents[2]
 KOOPGUIDE = [sys.executable, "-m", "koopguide"]
@@ -99,14 +100,7 @@ class Process:
         )
 
     def stop(self) -> int:
-        if self.popen.poll() is None:
-            self.popen.terminate()
-            try:
-                self.popen.wait(10)
-            except subprocess.TimeoutExpired:
-                self.popen.kill()
-                self.popen.wait(5)
-        return self.popen.returncode
+        return stop_process(self.popen)
 
 
 @dataclass

@@ -134,6 +134,6 @@ def test_two_guided_boats_move_over_the_streamlines_in_headless_chromium(tmp_pat
 
 
 def _keep_screenshot() -> Path | None:
-    """``KOOPGUIDE_KEEP_SCREENSHOT=docs/dashboard.png`` copies the screenshot there (how the docs' was made)."""
+    """``KOOPGUIDE_KEEP_SCREENSHOT=docs/img/dashboard.png`` copies the screenshot there (how the docs' was made)."""
     target = os.environ.get("KOOPGUIDE_KEEP_SCREENSHOT")
     return Path(target) if target else None

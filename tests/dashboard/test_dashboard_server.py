@@ -20,8 +20,7 @@ from koopguide.bus.status_bus import StatusBus
 from koopguide.bus.zenoh_config import default_zenoh_config
 from koopguide.dashboard.hub import FleetHub
 from koopguide.dashboard.server import Dashboard, Listen
-from tests.guidance.test_monitor import publishing
-from tests.guidance.test_status_bus import config_snapshot, field_sampler, free_port, sample_status
+from tests.support.status_samples import config_snapshot, field_sampler, free_port, publishing, sample_status
 
 TOKEN = "server-test-token-0123456789"
 

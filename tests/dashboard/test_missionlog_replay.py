@@ -20,18 +20,18 @@ from koopguide.dashboard.replay import frame_times
 from koopguide.guidance import settings
 from koopguide.guidance.law.command import GuidanceLaw
 from koopguide.model.field import load_field
-from tests.guidance.test_status_bus import sample_status
+from tests.support.status_samples import sample_status
 
 DT = 0.1  # command period [s]
 CURRENT = np.array([0.0, 0.02])  # toward the east [m/s]
 
 
 @pytest.fixture(scope="module")
-def mission(tmp_path_factory: pytest.TempPathFactory, zshape_default_model: Path) -> dict:
+def mission(tmp_path_factory: pytest.TempPathFactory, zshape_model: Path) -> dict:
     """Fly from Zshape's first demonstration start for up to 60 s (or until 5 s after arrival) and log
     everything; returns what was logged."""
     folder = tmp_path_factory.mktemp("mission")
-    model = zshape_default_model
+    model = zshape_model
     cfg = settings.load(None, {"vehicle_id": "boat9"})
     law = GuidanceLaw.from_config(load_field(model), cfg)
     rng = np.random.default_rng(0)

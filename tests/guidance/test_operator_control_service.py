@@ -19,10 +19,10 @@ from koopguide.bus.zenoh_config import default_zenoh_config
 from koopguide.guidance.daemon import GuidanceDaemon
 from koopguide.guidance.operator import DISABLED
 from koopguide.harness.mission import free_udp_port
-
-from .scripted_vehicle import ScriptedVehicle
-from .test_service_failsafes import config, speed, until
-from .test_status_bus import Listener, free_port
+from tests.bus.test_status_bus import Listener
+from tests.guidance.test_service_failsafes import config, speed, until
+from tests.support.scripted_vehicle import ScriptedVehicle
+from tests.support.status_samples import free_port
 
 TOKEN = "operator-test-token-0123456789"
 

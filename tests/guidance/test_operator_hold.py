@@ -12,8 +12,7 @@ import pytest
 from koopguide.guidance.events import Arm, OperatorHold, SetMode
 from koopguide.guidance.law.command import GuidanceState
 from koopguide.mavlink.rover import GUIDED
-
-from .test_supervisor import MANUAL, Bench
+from tests.guidance.test_supervisor import MANUAL, Bench
 
 S = GuidanceState
 

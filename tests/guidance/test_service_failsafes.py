@@ -18,8 +18,7 @@ import pytest
 from koopguide.guidance import settings
 from koopguide.guidance.daemon import GuidanceDaemon
 from koopguide.harness.mission import free_udp_port
-
-from .scripted_vehicle import GUIDED, LOITER, ScriptedVehicle
+from tests.support.scripted_vehicle import GUIDED, LOITER, ScriptedVehicle
 
 
 def config(port: int, **overrides):

@@ -2,7 +2,9 @@
 
 Rows of issue 11's table that concern the service's intake - fake positions at the goal, velocity 1e30,
 ``time_boot_ms`` = 4e9, a vehicle reboot, a NaN flood - and issue 10's drift-off/reacquire and stalled
-vehicle. A spoofer is a second pymavlink sender claiming the vehicle's system id from another port.
+vehicle. The bad messages are sent from the vehicle's own socket (a faulty sensor, or a spoofer that also
+forges the vehicle's address): they pass source pinning and reach the service's input limits. A spoofer
+from another address is dropped before that by the link (tests/mavlink/test_service_pinning.py).
 """
 
 from __future__ import annotations
@@ -17,12 +19,11 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
-from pymavlink import mavutil
 
 from koopguide.guidance.daemon import GuidanceDaemon
 from koopguide.harness.mission import free_udp_port
+from tests.support.scripted_vehicle import GUIDED, ScriptedVehicle
 
-from .scripted_vehicle import GUIDED, ScriptedVehicle
 from .test_service_failsafes import config, speed, until
 
 
@@ -45,15 +46,24 @@ async def service(
         await task
 
 
-def spoofer(port: int):
-    """Another UDP sender claiming to be the vehicle (system 1, component 1)."""
-    return mavutil.mavlink_connection(
-        f"udpout:127.0.0.1:{port}", source_system=1, source_component=1, dialect="ardupilotmega"
-    )
+class FromTheVehicle:
+    """Messages sent through the scripted vehicle's own connection (under its lock: pymavlink is not thread-safe)."""
+
+    def __init__(self, boat: ScriptedVehicle) -> None:
+        self.boat = boat
+
+    def __getattr__(self, name: str):
+        send = getattr(self.boat.conn.mav, name)
+
+        def locked(*args):
+            with self.boat.lock:
+                return send(*args)
+
+        return locked
 
 
-def port_of(daemon: GuidanceDaemon) -> int:
-    return int(daemon.cfg.mavlink.endpoint.rsplit(":", 1)[1])
+def spoofer(boat: ScriptedVehicle) -> FromTheVehicle:
+    return FromTheVehicle(boat)
 
 
 def largest_gap(times: list[float]) -> float:
@@ -65,14 +75,11 @@ def test_half_a_second_of_fake_positions_at_the_goal_holds_and_never_arrives(zsh
     async def scenario() -> None:
         async with service(zshape_model) as (daemon, boat):
             await asyncio.sleep(0.5)
-            fake, states = spoofer(port_of(daemon)), []
-            try:
-                for _ in range(50):  # 100 Hz for 0.5 s, stamped with the vehicle's own time
-                    fake.mav.local_position_ned_send(int(boat.t * 1000), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-                    states.append(daemon.state.value)
-                    await asyncio.sleep(0.01)
-            finally:
-                fake.close()
+            fake, states = spoofer(boat), []
+            for _ in range(50):  # 100 Hz for 0.5 s, stamped with the vehicle's own time
+                fake.local_position_ned_send(int(boat.t * 1000), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+                states.append(daemon.state.value)
+                await asyncio.sleep(0.01)
             assert "hold" in states and "arrived" not in states and not daemon.arrived
             assert "farther than the vehicle can move" in daemon.status()["reason"] or daemon.state.value == "hold"
             p, _ = daemon.estimate()
@@ -89,13 +96,10 @@ def test_three_velocities_of_1e30_are_rejected_and_guidance_goes_on(zshape_model
     async def scenario() -> None:
         async with service(zshape_model) as (daemon, boat):
             await asyncio.sleep(1.0)
-            fake = spoofer(port_of(daemon))
-            try:
-                for _ in range(3):
-                    fake.mav.local_position_ned_send(int(boat.t * 1000), boat.n, boat.e, 0.0, 1e30, 1e30, 0.0)
-                    await asyncio.sleep(0.02)
-            finally:
-                fake.close()
+            fake = spoofer(boat)
+            for _ in range(3):
+                fake.local_position_ned_send(int(boat.t * 1000), boat.n, boat.e, 0.0, 1e30, 1e30, 0.0)
+                await asyncio.sleep(0.02)
             t_after = boat.t
             await asyncio.sleep(2.0)
             assert daemon.rejected_inputs["velocity"] == 3
@@ -113,11 +117,8 @@ def test_one_time_boot_ms_of_4e9_does_not_freeze_the_command_loop(zshape_model: 
     async def scenario() -> None:
         async with service(zshape_model) as (daemon, boat):
             await asyncio.sleep(0.5)
-            fake = spoofer(port_of(daemon))
-            try:
-                fake.mav.local_position_ned_send(4_000_000_000, boat.n, boat.e, 0.0, 0.0, 0.0, 0.0)
-            finally:
-                fake.close()
+            fake = spoofer(boat)
+            fake.local_position_ned_send(4_000_000_000, boat.n, boat.e, 0.0, 0.0, 0.0, 0.0)
             t_inject = boat.t
             await asyncio.sleep(2.0)
             times = [r.t for r in boat.setpoints(since=t_inject)]
@@ -153,17 +154,14 @@ def test_a_vehicle_reboot_restarts_the_clock_and_re_requests_streams_and_guided(
 def test_a_nan_flood_is_logged_once_a_second(zshape_model: Path, caplog: pytest.LogCaptureFixture) -> None:
     async def scenario() -> None:
         async with service(zshape_model) as (daemon, boat):
-            fake = spoofer(port_of(daemon))
+            fake = spoofer(boat)
             caplog.clear()
             sent, end = 0, time.monotonic() + 5.0
-            try:
-                while time.monotonic() < end:  # ~5 s of NaN positions, as fast as the loop lets them go
-                    for _ in range(5):
-                        fake.mav.local_position_ned_send(int(boat.t * 1000), math.nan, 0.0, 0.0, 0.0, 0.0, 0.0)
-                        sent += 1
-                    await asyncio.sleep(0.005)
-            finally:
-                fake.close()
+            while time.monotonic() < end:  # ~5 s of NaN positions, as fast as the loop lets them go
+                for _ in range(5):
+                    fake.local_position_ned_send(int(boat.t * 1000), math.nan, 0.0, 0.0, 0.0, 0.0, 0.0)
+                    sent += 1
+                await asyncio.sleep(0.005)
             await asyncio.sleep(0.2)
             lines = [r for r in caplog.records if "rejected non-finite" in r.getMessage()]
             assert sent > 1000 and daemon.rejected_inputs["non-finite"] >= 0.9 * sent

@@ -13,8 +13,7 @@ from koopguide.mavlink.intake import Intake, LinkStats
 from koopguide.mavlink.link import Link
 from koopguide.mavlink.link_settings import LinkSettings
 from koopguide.mavlink.signing import SignatureCheck, SigningKey
-
-from .support import encoder, frame, local_position, vehicle_heartbeat
+from tests.support.mavlink_frames import encoder, frame, local_position, vehicle_heartbeat
 
 KEY = SigningKey(bytes(range(1, 33)), "test")
 HEADER_FLOOD = bytes([0xFD, 255, 0, 0, 0, 1, 1, 32, 0, 0])  # a MAVLink 2 header claiming a 255-byte payload

@@ -18,8 +18,7 @@ from koopguide.mavlink.link import Link
 from koopguide.mavlink.link_settings import LinkSettings
 from koopguide.mavlink.signing import SigningKey
 from koopguide.mavlink.wire import mavlink
-
-from .support import encoder, frame, local_position, until, vehicle_heartbeat
+from tests.support.mavlink_frames import encoder, frame, local_position, until, vehicle_heartbeat
 
 SERVICE = (255, 191)
 VEHICLE = (1, 1)

@@ -20,9 +20,8 @@ from koopguide.guidance.daemon import GuidanceDaemon
 from koopguide.harness.mission import free_udp_port
 from koopguide.mavlink import rover
 from koopguide.mavlink.signing import SigningKey
-from tests.guidance.scripted_vehicle import ScriptedVehicle
-
-from .support import encoder, frame, local_position, until, vehicle_heartbeat
+from tests.support.mavlink_frames import encoder, frame, local_position, until, vehicle_heartbeat
+from tests.support.scripted_vehicle import ScriptedVehicle
 
 HEADER_FLOOD = bytes([0xFD, 255, 0, 0, 0, 1, 1, 32, 0, 0])  # a MAVLink 2 header claiming a 255-byte payload
 

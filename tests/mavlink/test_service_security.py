@@ -22,9 +22,8 @@ from koopguide.mavlink.signing import SigningKey
 from koopguide.mavlink.wire import mavlink
 from sitl import config as sitl_config
 from sitl.runner import SimulationThread
-from tests.guidance.scripted_vehicle import ScriptedVehicle
-
-from .support import encoder, frame, local_position, until, vehicle_heartbeat
+from tests.support.mavlink_frames import encoder, frame, local_position, until, vehicle_heartbeat
+from tests.support.scripted_vehicle import ScriptedVehicle
 
 FAKE_NED = (9.0, 9.0)  # where the spoofer claims the boat is [m]
 FAKE_TARGET = (7.77, -7.77)  # the position target the spoofer asks the vehicle for [m]

@@ -16,8 +16,7 @@ from koopguide.mavlink.signing import (
     timestamp_now,
 )
 from koopguide.mavlink.wire import mavlink, new_decoder
-
-from .support import encoder, frame, local_position, vehicle_heartbeat
+from tests.support.mavlink_frames import encoder, frame, local_position, vehicle_heartbeat
 
 KEY = SigningKey(bytes(range(32)), "test")
 

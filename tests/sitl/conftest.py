@@ -6,9 +6,9 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
-from sitl_gcs import GCS_COMPONENT, GCS_SYSTEM, Gcs, mavutil, sim_config, sitl_config_merge
 
 from sitl.runner import SimulationThread
+from tests.support.sitl_gcs import GCS_COMPONENT, GCS_SYSTEM, Gcs, mavutil, sim_config, sitl_config_merge
 
 
 @pytest.fixture

@@ -14,10 +14,10 @@ from collections.abc import Iterator
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from sitl_gcs import GCS_COMPONENT, GCS_SYSTEM, Gcs, mavlink, mavutil, sim_config
 
 from sitl.autopilot import SUPPORTED_MODES, Frame, Navigation, SetpointRejected, interpret_position_target
 from sitl.runner import SimulationThread
+from tests.support.sitl_gcs import GCS_COMPONENT, GCS_SYSTEM, Gcs, mavlink, mavutil, sim_config
 
 GUIDED, MANUAL = 15, 0
 NAN, INF = float("nan"), float("inf")

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from sitl_gcs import sim_config
 
 from sitl.boat import Boat
 from sitl.flow import Flow
@@ -20,6 +19,7 @@ from sitl.vessel import (
     thrust,
 )
 from sitl.world import Tank
+from tests.support.sitl_gcs import sim_config
 
 DT = 0.01
 

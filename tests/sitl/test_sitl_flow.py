@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 import pytest
-from sitl_gcs import sim_config
 
 from sitl.config import DoubleGyreConfig, VortexConfig
 from sitl.flow import Flow, OrnsteinUhlenbeck2D, double_gyre_velocity, lamb_oseen_velocity, uniform_velocity
+from tests.support.sitl_gcs import sim_config
 
 
 def gyre(mu=0.0):

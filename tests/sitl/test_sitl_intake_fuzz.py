@@ -14,7 +14,6 @@ import math
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
-from sitl_gcs import sim_config
 
 from koopguide.mavlink.endpoint import Endpoint
 from koopguide.mavlink.link import Link
@@ -24,6 +23,7 @@ from sitl import inbound
 from sitl.recorder import Recorder
 from sitl.runner import Simulation
 from sitl.telemetry import StreamSchedule, TelemetryWriter, default_intervals
+from tests.support.sitl_gcs import sim_config
 
 FLOATS = st.floats(width=32) | st.sampled_from([math.nan, math.inf, -math.inf, 1e30, -1e30, 0.0, 1.0, 15.0])
 INT32 = st.integers(-(2**31), 2**31 - 1)

@@ -7,7 +7,7 @@ import math
 import random
 import statistics
 
-from sitl_gcs import VELOCITY_MASK, mavlink
+from tests.support.sitl_gcs import VELOCITY_MASK, mavlink
 
 GUIDED, HOLD, LOITER, MANUAL = 15, 4, 5, 0
 SOUTH_END = {"start_poses": [[0.4, 1.5, 0.0]]}  # room to run north in the 4.5 m tank

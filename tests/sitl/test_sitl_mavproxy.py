@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.support.processes import stop_process
+
 pytest.importorskip("MAVProxy", reason="MAVProxy is installed by scripts/bootstrap.sh (--no-deps)")
 
 REPO = Path(__file__).resolve().parents[2]
@@ -59,13 +61,7 @@ class Child:
         raise AssertionError(f"no {what} within {timeout} s; output:\n" + "\n".join(self.lines[-30:]))
 
     def stop(self) -> None:
-        if self.popen.poll() is None:
-            self.popen.terminate()
-            try:
-                self.popen.wait(10)
-            except subprocess.TimeoutExpired:
-                self.popen.kill()
-                self.popen.wait(5)
+        stop_process(self.popen)
 
 
 def fields(line: str, kind: str) -> dict[str, float] | None:

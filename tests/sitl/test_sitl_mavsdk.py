@@ -5,9 +5,9 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from sitl_gcs import sim_config
 
 from sitl.runner import Simulation
+from tests.support.sitl_gcs import sim_config
 
 mavsdk = pytest.importorskip("mavsdk.asyncio", reason="mavsdk is in the dev extra")
 telemetry = pytest.importorskip("mavsdk.asyncio.plugins.telemetry")

@@ -5,9 +5,8 @@ from __future__ import annotations
 import asyncio
 import socket
 
-from sitl_gcs import Gcs, mavlink, mavutil, sim_config
-
 from sitl.runner import Simulation, SimulationThread
+from tests.support.sitl_gcs import Gcs, mavlink, mavutil, sim_config
 
 
 def unused_udp_port() -> int:

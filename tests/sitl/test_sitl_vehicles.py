@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from open_water import current, fly, make_boat, run
 
 from sitl.config import VehicleKind
 from sitl.vehicles import body_force
 from sitl.vessel import steady_surge_speed
+from tests.support.open_water import current, fly, make_boat, run
 
 KINDS = ("diff_thrust", "rudder", "vectored")
 AHEAD = {"diff_thrust": (1.0, 1.0), "rudder": (1.0, 0.0), "vectored": (1.0, 1.0, 0.0, 0.0)}

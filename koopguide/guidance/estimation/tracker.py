@@ -4,8 +4,9 @@ Conventions: state ``x = [N, vN, E, vE]`` (m, m/s); fixes ``(N, E, vN, vE)`` fro
 time is the vehicle's own clock (its messages' ``time_boot_ms``, in seconds), so a simulator running at
 a speed-up is filtered exactly as real time would be.
 
-Model (FACTS "filterpy"): F = blockdiag([[1, dt], [0, 1]]) per axis, Q = white-acceleration noise
-(Q_discrete_white_noise, block_size 2), H picks all four measured values.
+Model (filterpy's constant-velocity recipe; docs/guidance.md "The estimator"): F = blockdiag([[1, dt],
+[0, 1]]) per axis, Q = white-acceleration noise (Q_discrete_white_noise, block_size 2), H picks all four
+measured values.
 Robustness: a fix whose innovation has squared Mahalanobis distance above ``gate_chi2`` is rejected;
 ``reset_after_rejections`` rejections in a row (a real jump, e.g. an EKF reset) restart the filter at the
 fix; so does a gap or a backwards step in vehicle time (a reboot).

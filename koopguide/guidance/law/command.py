@@ -39,7 +39,7 @@ from koopguide.model.field import FlowField
 
 
 class GuidanceState(enum.Enum):
-    """The service's state as published in the status (DESIGN.md)."""
+    """The service's state as published in the status (docs/zenoh.md, docs/guidance.md "States")."""
 
     IDLE = "idle"  # not started
     WAITING = "waiting"  # no vehicle heartbeat / position yet, or not in GUIDED
@@ -285,7 +285,7 @@ class GuidanceLaw:
 def crab(v_ground: np.ndarray, current_ned: np.ndarray, glide_limit_rad: float = math.pi / 2) -> np.ndarray:
     """The velocity setpoint that makes the boat move over ground at ``v_ground`` in current ``current_ned``.
 
-    ArduPilot Rover (GUIDED, velocity setpoint; FACTS "ArduPilot Rover") steers the heading to the
+    ArduPilot Rover (GUIDED, velocity setpoint; docs/rover.md) steers the heading to the
     setpoint's direction h and holds the ground speed *along* h at the setpoint's norm s (s >= 0: no
     reverse); the current's component across h, (c . n) n, is not corrected and sets the boat sideways. The
     ground velocity is then s h + (c . n) n. It equals ``v_ground`` when h is the direction of

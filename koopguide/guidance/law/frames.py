@@ -1,4 +1,4 @@
-"""Model coordinates <-> local NED metres (DESIGN.md "Frames", a public contract).
+"""Model coordinates <-> local NED metres (docs/frames.md, a public contract).
 
 Conventions: model points ``p = (x, y)`` in model units (LASA: x right, y up); local NED points
 ``(N, E)`` in metres; velocities likewise per unit time. Three numbers fix the map: ``goal_ned`` (where

@@ -20,8 +20,13 @@ def training_config(user_file: Path | None, overrides: dict[str, Any] | None = N
     return config.build(trainer.TrainConfig, config.load_layers("train", user_file, overrides or {}))
 
 
+class UncertifiedModelError(ValueError):
+    """A trained model failed (or skipped) its convergence certificate and was not written."""
+
+
 def save(path: Path, trained: trainer.TrainedField, demos: data.Demonstrations, cfg: trainer.TrainConfig) -> None:
-    """Write ``trained`` with everything a reader needs: goal, bounds, settings, data digest, figures."""
+    """Write ``trained`` with everything a reader needs: goal, bounds, settings, data digest, figures, its
+    Lyapunov limit and its convergence certificate."""
     lo, hi = demos.bounds
     meta = {
         "dim": demos.dim,
@@ -37,7 +42,17 @@ def save(path: Path, trained: trainer.TrainedField, demos: data.Demonstrations, 
         "train": trained.info,
         "created_unix": time.time(),
     }
-    modelfile.write(path, {"W": trained.W, "b": trained.b, "A": trained.A, "B": trained.B}, meta)
+    weights = {"W": trained.W, "b": trained.b, "A": trained.A, "B": trained.B}
+    if trained.limit is not None:
+        weights["limit_table"] = trained.limit.table
+        meta["limit"] = {
+            "lo": trained.limit.lo.tolist(),
+            "hi": trained.limit.hi.tolist(),
+            "outside": trained.limit.outside,
+        }
+    if trained.certificate is not None:
+        meta["certificate"] = trained.certificate
+    modelfile.write(path, weights, meta)
 
 
 def train_to_file(demos: data.Demonstrations, path: Path, seed: int = 0, cfg: trainer.TrainConfig | None = None,

@@ -16,6 +16,8 @@ import numpy as np
 import torch
 
 from koopguide.base import data as demo_data
+from koopguide.model.certificate import FunnelSettings, certify_and_repair
+from koopguide.model.field import FlowField
 from koopguide.model.learn.losses import (
     DivergenceOf,
     divergence_loss,
@@ -25,6 +27,7 @@ from koopguide.model.learn.losses import (
     pair_losses,
 )
 from koopguide.model.learn.model import FourierKoopman
+from koopguide.model.lyapunov import RatioLimit
 
 
 class LRSchedule(enum.Enum):
@@ -75,6 +78,7 @@ class TrainConfig:
     loss: LossConfig
     optim: OptimConfig
     stability: StabilityConfig
+    convergence: FunnelSettings | None  # Lyapunov limit + certificate (None: raw field, uncertified)
 
 
 @dataclass(frozen=True)
@@ -89,13 +93,27 @@ class TrainedField:
     goal_centred: bool
     substeps: int
     info: dict  # losses, timing, seed, spectral radius before/after projection
+    limit: RatioLimit | None = None  # the Lyapunov limit (koopguide.model.lyapunov), if certified
+    certificate: dict | None = None  # koopguide.model.certificate.certify output, if checked
+    flow: FlowField | None = None  # the certified numpy field, as built during certification
+
+    def field(self) -> FlowField:
+        """The numpy field this training produced (limited if it has a limit)."""
+        if self.flow is not None:
+            return self.flow
+        return FlowField(self.W, self.b, self.A, self.B, self.goal, self.goal_centred, self.substeps, limit=self.limit)
 
 
 ProgressFn = Callable[[int, int, dict[str, float]], None]
 
 
-def train(demos: demo_data.Demonstrations, cfg: TrainConfig, seed: int,
-          progress: ProgressFn | None = None, progress_every: int = 250) -> TrainedField:
+def train(
+    demos: demo_data.Demonstrations,
+    cfg: TrainConfig,
+    seed: int,
+    progress: ProgressFn | None = None,
+    progress_every: int = 250,
+) -> TrainedField:
     """Fit a flow field to ``demos``; deterministic for a given ``seed`` (and thread count)."""
     _check(cfg)
     if cfg.threads > 0:
@@ -118,12 +136,8 @@ def train(demos: demo_data.Demonstrations, cfg: TrainConfig, seed: int,
 
     goal = torch.as_tensor(demos.goal, dtype=torch.float64)
     model = FourierKoopman(demos.dim, cfg.model.nu, cfg.model.rank, goal, cfg.model.goal_centred, gen).to(dtype)
-    opt = _adamw(model, cfg.optim)
     steps = cfg.optim.steps
-    if cfg.optim.schedule is LRSchedule.COSINE:
-        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 0.5 * (1.0 + math.cos(math.pi * k / steps)))
-    else:
-        sched = None
+    opt = AdamW(list(model.parameters()), cfg.optim.lr, cfg.optim.weight_decay)
 
     n_pairs = x.shape[0]
     batch = min(cfg.optim.batch_size, n_pairs)
@@ -153,16 +167,14 @@ def train(demos: demo_data.Demonstrations, cfg: TrainConfig, seed: int,
             loss = loss + cfg.loss.multistep * loss_m
         else:
             loss_m = None
-        opt.zero_grad(set_to_none=True)
+        opt.zero_grad()
         loss.backward()
-        opt.step()
-        if sched is not None:
-            sched.step()
+        cosine = cfg.optim.schedule is LRSchedule.COSINE
+        opt.step(0.5 * (1.0 + math.cos(math.pi * (k - 1) / steps)) if cosine else 1.0)
         if not math.isfinite(loss.item()):
             raise FloatingPointError(f"training diverged at step {k}: loss {loss.item()}")
         if progress is not None and (k % progress_every == 0 or k == steps):
-            terms = {"loss": loss.item(), "koopman": loss_k.item(), "state": loss_s.item(),
-                     "divergence": loss_d.item()}
+            terms = {"loss": loss.item(), "koopman": loss_k.item(), "state": loss_s.item(), "divergence": loss_d.item()}
             if loss_g is not None:
                 terms["goal"] = loss_g.item()
             if loss_m is not None:
@@ -175,26 +187,76 @@ def train(demos: demo_data.Demonstrations, cfg: TrainConfig, seed: int,
     rho_before = spectral_radius(A, B)
     if cfg.stability.max_spectral_radius is not None:
         A = project_spectrum(A, B, cfg.stability.max_spectral_radius)
+    fit_seconds = time.perf_counter() - started
+    limit, cert, limited = None, None, None
+    if cfg.convergence is not None:
+        raw = FlowField(W, b, A, B, demos.goal, cfg.model.goal_centred, cfg.subsample_every)
+        samples = np.concatenate([t[::5] for t in demos.trajectories])
+        limited, cert = certify_and_repair(raw, samples, demos.bounds, cfg.convergence)
+        limit = limited.limit
     info = {
         "seed": seed,
         "steps": steps,
         "pairs": int(n_pairs),
+        "fit_seconds": fit_seconds,
+        "certify_seconds": time.perf_counter() - started - fit_seconds,
         "train_seconds": time.perf_counter() - started,
         "final_koopman_loss": final_k,
         "rho_trained": rho_before,
         "rho": spectral_radius(A, B),
         "torch_version": str(torch.__version__),
     }
-    return TrainedField(W=W, b=b, A=A, B=B, goal=demos.goal.copy(), goal_centred=cfg.model.goal_centred,
-                        substeps=cfg.subsample_every, info=info)
+    return TrainedField(
+        W=W,
+        b=b,
+        A=A,
+        B=B,
+        goal=demos.goal.copy(),
+        goal_centred=cfg.model.goal_centred,
+        substeps=cfg.subsample_every,
+        info=info,
+        limit=limit,
+        certificate=cert,
+        flow=limited,
+    )
 
 
-def _adamw(model: torch.nn.Module, optim: OptimConfig) -> torch.optim.Optimizer:
-    """AdamW, fused on CPU where this torch has it (>= 2.4): same update, fewer kernel launches."""
-    try:
-        return torch.optim.AdamW(model.parameters(), lr=optim.lr, weight_decay=optim.weight_decay, fused=True)
-    except (RuntimeError, TypeError, ValueError):
-        return torch.optim.AdamW(model.parameters(), lr=optim.lr, weight_decay=optim.weight_decay)
+class AdamW:
+    """AdamW (Loshchilov & Hutter 2019, Algorithm 2) in a few tensor operations per parameter.
+
+    The same update as ``torch.optim.AdamW`` (betas 0.9/0.999, eps 1e-8, decoupled weight decay), without
+    its per-step dispatch and first-use compiler import, which cost more than the math at these sizes.
+    """
+
+    def __init__(
+        self,
+        params: list[torch.nn.Parameter],
+        lr: float,
+        weight_decay: float,
+        betas: tuple[float, float] = (0.9, 0.999),
+        eps: float = 1e-8,
+    ) -> None:
+        self.params, self.lr, self.wd, self.betas, self.eps = params, lr, weight_decay, betas, eps
+        self.m = [torch.zeros_like(p) for p in params]
+        self.v = [torch.zeros_like(p) for p in params]
+        self.t = 0
+
+    def zero_grad(self) -> None:
+        for p in self.params:
+            p.grad = None
+
+    @torch.no_grad()
+    def step(self, lr_scale: float = 1.0) -> None:
+        self.t += 1
+        b1, b2 = self.betas
+        lr = self.lr * lr_scale
+        c1, c2 = 1.0 - b1**self.t, 1.0 - b2**self.t
+        for p, m, v in zip(self.params, self.m, self.v, strict=True):
+            g = p.grad
+            p.mul_(1.0 - lr * self.wd)
+            m.mul_(b1).add_(g, alpha=1.0 - b1)
+            v.mul_(b2).addcmul_(g, g, value=1.0 - b2)
+            p.addcdiv_(m, (v / c2).sqrt_().add_(self.eps), value=-lr / c1)
 
 
 def spectral_radius(A: np.ndarray, B: np.ndarray) -> float:
@@ -237,5 +299,25 @@ def _check(cfg: TrainConfig) -> None:
     rho_max = cfg.stability.max_spectral_radius
     if rho_max is not None and not 0 < rho_max < 1:
         problems.append(f"stability.max_spectral_radius must be in (0, 1), got {cfg.stability.max_spectral_radius}")
+    conv = cfg.convergence
+    if conv is not None:
+        checks = [
+            ("outside", conv.outside, 0.0, 1.0, False), ("tube_width", conv.tube_width, 0.0, 1.0, True),
+            ("margin", conv.margin, 0.0, 1.0, True), ("table_enlarge", conv.table_enlarge, 0.0, 2.0, True),
+            ("enlarge", conv.enlarge, 0.0, 2.0, True), ("tolerance", conv.tolerance, 0.0, 1e9, False),
+        ]  # fmt: skip
+        for name, value, lo, hi, closed in checks:
+            if not (lo < value <= hi if closed else lo < value < hi) and not (closed and value == lo):
+                problems.append(f"convergence.{name} must be in ({lo}, {hi}), got {value}")
+        if conv.enlarge > conv.table_enlarge:
+            problems.append(f"convergence.enlarge {conv.enlarge} must not exceed table_enlarge {conv.table_enlarge}")
+        for name, value, lo, hi in (
+            ("table_nodes", conv.table_nodes, 16, 1 << 20),
+            ("grid", conv.grid, 100, 2000),
+            ("learned_steps", conv.learned_steps, 1, 100000),
+            ("repairs", conv.repairs, 0, 20),
+        ):
+            if not lo <= value <= hi:
+                problems.append(f"convergence.{name} must be in [{lo}, {hi}], got {value}")
     if problems:
         raise ValueError("invalid training configuration: " + "; ".join(problems))

@@ -6,15 +6,11 @@ example run as subprocesses with a ``--zenoh-config`` file: the shipped default 
 
 from __future__ import annotations
 
-import asyncio
 import json
 import signal
 import subprocess
 import sys
-import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -22,7 +18,6 @@ import zenoh
 
 from koopguide.bus.monitor import PUBLISHER_HANDOVER_S, Monitor, MonitorState, VehicleView, render_table
 from koopguide.bus.status import encode_status
-from koopguide.bus.status_bus import StatusBus
 from koopguide.bus.zenoh_config import (
     ACL_CLIENT_CONFIG_FILE,
     ACL_ROUTER_CONFIG_FILE,
@@ -30,52 +25,13 @@ from koopguide.bus.zenoh_config import (
     WELL_KNOWN_PORT,
     default_zenoh_config,
 )
-from tests.guidance.test_status_bus import config_snapshot, field_sampler, free_port, sample_status, wait_for
+from tests.support.status_samples import free_port, publishing, sample_status, wait_for
 
 REPO = Path(__file__).resolve().parents[2]
 MONITOR = [sys.executable, "-m", "koopguide", "monitor"]
 
 
 # ---------------------------------------------------------------------------------- helpers
-@contextmanager
-def publishing(vehicle_id: str, port: int, state: str = "guiding", period: float = 0.05) -> Iterator[None]:
-    """A StatusBus publishing ``state`` every ``period`` s on a thread of its own, until the block ends."""
-    stop = threading.Event()
-    ready = threading.Event()
-    errors: list[BaseException] = []
-
-    async def run() -> None:
-        bus = await StatusBus.create(vehicle_id, default_zenoh_config(port), field_sampler, config_snapshot)
-        try:
-            assert bus.enabled
-            ready.set()
-            seq = 0
-            while not stop.is_set():
-                bus.publish(sample_status(vehicle_id, seq=seq, state=state))
-                seq += 1
-                await asyncio.sleep(period)
-        finally:
-            await bus.close()
-
-    def thread_main() -> None:
-        try:
-            asyncio.run(run())
-        except BaseException as exc:  # reported by the test thread below
-            errors.append(exc)
-            ready.set()
-
-    thread = threading.Thread(target=thread_main, name=f"publisher {vehicle_id}")
-    thread.start()
-    try:
-        assert ready.wait(10), "publisher did not start"
-        assert not errors, errors
-        yield
-    finally:
-        stop.set()
-        thread.join(10)
-    assert not errors, errors
-
-
 def config_file(tmp_path: Path, port: int) -> Path:
     """The shipped default configuration file, rendezvous moved to ``port``."""
     text = DEFAULT_ZENOH_CONFIG_FILE.read_text()

@@ -20,8 +20,7 @@ from koopguide.bus.zenoh_config import default_zenoh_config
 from koopguide.guidance import settings
 from koopguide.harness import mission
 from sitl import config as sitl_config
-
-from .test_status_bus import free_port
+from tests.support.status_samples import free_port
 
 SPEEDUP = 20.0
 ARRIVE_M = 0.15

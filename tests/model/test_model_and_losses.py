@@ -88,9 +88,9 @@ def test_spectral_projection_caps_rho_and_leaves_inner_eigenvalues_alone():
 
 
 def test_training_is_deterministic_for_a_seed_and_differs_across_seeds(zshape):
-    from tests.learn.conftest import small_config
+    from tests.support.models import small_config
 
-    cfg = small_config(optim={"steps": 60})
+    cfg = small_config(optim={"steps": 60}, convergence=None)  # weights only: no certificate needed
     a = trainer.train(zshape, cfg, seed=5)
     b = trainer.train(zshape, cfg, seed=5)
     c = trainer.train(zshape, cfg, seed=6)
@@ -100,12 +100,16 @@ def test_training_is_deterministic_for_a_seed_and_differs_across_seeds(zshape):
 
 
 def test_invalid_training_settings_are_refused_with_the_values():
-    from tests.learn.conftest import small_config
+    from tests.support.models import small_config
 
     with pytest.raises(ValueError, match=r"max_spectral_radius must be in \(0, 1\), got 1.5"):
         trainer.train(None, small_config(stability={"max_spectral_radius": 1.5}), seed=0)
     with pytest.raises(ValueError, match=r"optim.lr must be > 0, got -1.0"):
         trainer.train(None, small_config(optim={"lr": -1.0}), seed=0)
+    with pytest.raises(ValueError, match=r"convergence.grid must be in \[100, 2000\], got 50"):
+        trainer.train(None, small_config(convergence={"grid": 50}), seed=0)
+    with pytest.raises(ValueError, match=r"convergence.outside must be in \(0.0, 1.0\), got 1.0"):
+        trainer.train(None, small_config(convergence={"outside": 1.0}), seed=0)
 
 
 def test_xavier_bounds_as_reference():
@@ -115,9 +119,11 @@ def test_xavier_bounds_as_reference():
 
 
 def test_multistep_training_path_runs_and_reports_its_term(zshape):
-    from tests.learn.conftest import small_config
+    from tests.support.models import small_config
 
-    cfg = small_config(model={"nu": 64, "rank": 8}, optim={"steps": 20}, loss={"horizon": 4, "multistep": 0.5})
+    cfg = small_config(
+        model={"nu": 64, "rank": 8}, optim={"steps": 20}, loss={"horizon": 4, "multistep": 0.5}, convergence=None
+    )
     seen = []
     t = trainer.train(zshape, cfg, seed=0, progress=lambda k, n, terms: seen.append(terms), progress_every=10)
     assert len(seen) == 2 and all("multistep" in terms and terms["multistep"] > 0 for terms in seen)

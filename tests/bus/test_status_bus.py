@@ -12,9 +12,7 @@ import logging
 import math
 import socket
 import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 import zenoh
@@ -34,73 +32,18 @@ from koopguide.bus.zenoh_config import (
     default_zenoh_config,
     load_zenoh_config,
 )
+from tests.support.status_samples import (
+    async_wait_for,
+    config_snapshot,
+    field_sampler,
+    free_port,
+    sample_status,
+)
 
 BUS_LOGGER = "koopguide.bus.status_bus"
 
 
 # ---------------------------------------------------------------------------------- helpers
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def sample_status(vehicle_id: str = "boat1", **changes: Any) -> dict[str, Any]:
-    status = {
-        "t": 1_700_000_000.25,
-        "seq": 7,
-        "vehicle_id": vehicle_id,
-        "state": "guiding",
-        "reason": "following_the_field",
-        "degraded": False,
-        "mode": "GUIDED",
-        "armed": True,
-        "position_ned": [12.5, -3.25],
-        "velocity_ned": [0.5, 0.25],
-        "goal_ned": [0.0, 0.0],
-        "distance_to_goal_m": 12.92,
-        "cmd_velocity_ned": [-0.75, 0.5],
-        "speed_limit_mps": 1.5,
-        "position_age_s": 0.04,
-        "loop_latency_ms": {"p50": 0.8, "p99": 2.5},
-        "model": "zshape.pt",
-    }
-    status.update(changes)
-    return status
-
-
-def wait_for(predicate: Callable[[], Any], timeout: float = 5.0, poll: float = 0.02) -> Any:
-    """Poll ``predicate`` until it returns something truthy; fail after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        result = predicate()
-        if result:
-            return result
-        time.sleep(poll)
-    pytest.fail(f"condition not met within {timeout} s")
-
-
-async def async_wait_for(predicate: Callable[[], Any], within: float = 5.0) -> Any:
-    deadline = time.monotonic() + within
-    while time.monotonic() < deadline:
-        result = predicate()
-        if result:
-            return result
-        await asyncio.sleep(0.02)
-    pytest.fail(f"condition not met within {within} s")
-
-
-def field_sampler(params: dict[str, str]) -> dict:
-    n = int(params.get("n", "3"))
-    if not 2 <= n <= 50:
-        raise ValueError(f"grid size n must be 2..50, got {n}")
-    return {"n": n, "north": [float(i) for i in range(n)], "params": params}
-
-
-def config_snapshot() -> dict:
-    return {"vehicle_id": "boat1", "command": {"max_speed_mps": 1.5}}
-
-
 def open_bus(vehicle_id: str, port: int) -> StatusBus:
     """Coroutine factory shortcut used inside asyncio tests."""
     return StatusBus.create(vehicle_id, default_zenoh_config(port), field_sampler, config_snapshot)

@@ -11,13 +11,13 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from sitl_gcs import sim_config, sitl_config_merge
 
 from sitl.autopilot import MODE_NUMBERS, Frame, interpret_position_target
 from sitl.boat import Boat
 from sitl.flow import Flow
 from sitl.vehicles import VehicleParams
 from sitl.world import Tank
+from tests.support.sitl_gcs import sim_config, sitl_config_merge
 
 DT = 0.01  # physics step [s]
 CONTROL_EVERY = 2  # autopilot at 50 Hz
