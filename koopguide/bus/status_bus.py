@@ -8,16 +8,18 @@ Keys for vehicle ``<id>`` (docs/zenoh.md):
                             dict of strings; it answers JSON bytes (awaited: the service computes them in
                             a worker process); a ValueError it raises becomes an error reply
 ``koopguide/<id>/config``   queryable; the reply is ``config_snapshot()`` as JSON
+``koopguide/<id>/control``  subscriber (when ``on_control`` is given): each payload goes to
+                            ``on_control(payload)`` on the event loop (operator requests, bus.control)
 
 Zenoh is optional for guidance: if the session cannot be opened or an entity cannot be declared,
 :meth:`StatusBus.create` logs one warning and returns a disabled bus whose :meth:`publish` does
 nothing. A failing put is logged once per outage, never per cycle.
 
 Threads: no Python callback is handed to zenoh (a callback left declared keeps a thread alive and
-hangs the process at exit). Queries arrive in zenoh ring channels and a task on the event loop
-drains them every :data:`QUERY_POLL_S`. ``config_snapshot`` is cheap and runs on the event loop;
-``sample_field`` is awaited, one query at a time, and does its heavy work off the loop (the service's
-:mod:`koopguide.guidance.field_grid`), so a field query never holds up the control loop.
+hangs the process at exit). Queries and control requests arrive in zenoh ring channels and a task on
+the event loop drains them every :data:`QUERY_POLL_S`. ``config_snapshot`` is cheap and runs on the
+event loop; ``sample_field`` is awaited, one query at a time, and does its heavy work off the loop (the
+service's :mod:`koopguide.guidance.field_grid`), so a field query never holds up the control loop.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from typing import Any
 
 import zenoh
 
+from koopguide.bus.control import control_key
 from koopguide.bus.status import encode_status, validate_vehicle_id
 from koopguide.bus.zenoh_config import load_zenoh_config, zenoh_error_text
 
@@ -48,6 +51,7 @@ QUERY_BACKLOG = 16
 
 SampleField = Callable[[dict[str, str]], Awaitable[bytes]]
 ConfigSnapshot = Callable[[], dict]
+OnControl = Callable[[bytes], None]
 
 
 @dataclass(frozen=True)
@@ -72,6 +76,7 @@ class _Declared:
     token: zenoh.LivelinessToken
     field_queryable: zenoh.Queryable
     config_queryable: zenoh.Queryable
+    control: zenoh.Subscriber | None = None
 
 
 class StatusBus:
@@ -83,12 +88,14 @@ class StatusBus:
         declared: _Declared | None,
         sample_field: SampleField,
         config_snapshot: ConfigSnapshot,
+        on_control: OnControl | None = None,
     ) -> None:
         self.vehicle_id = vehicle_id
         self.keys = StatusKeys.for_vehicle(vehicle_id)
         self._declared = declared
         self._sample_field = sample_field
         self._config_snapshot = config_snapshot
+        self._on_control = on_control
         self._query_task: asyncio.Task[None] | None = None
         self._put_failing = False
         #: Puts that raised since the bus opened (each outage is logged once).
@@ -102,13 +109,15 @@ class StatusBus:
         zenoh_config: zenoh.Config,
         sample_field: SampleField,
         config_snapshot: ConfigSnapshot,
+        on_control: OnControl | None = None,
     ) -> StatusBus:
         """Open the session off the event loop and declare everything; disabled (not raised) on failure.
 
         A malformed ``vehicle_id`` is the caller's error and raises ValueError.
         """
         keys = StatusKeys.for_vehicle(vehicle_id)
-        opening = asyncio.ensure_future(asyncio.to_thread(_open_and_declare, zenoh_config, keys))
+        control = control_key(vehicle_id) if on_control is not None else None
+        opening = asyncio.ensure_future(asyncio.to_thread(_open_and_declare, zenoh_config, keys, control))
         try:
             declared = await asyncio.shield(opening)
         except (zenoh.ZError, OSError) as exc:
@@ -117,11 +126,11 @@ class StatusBus:
                 vehicle_id,
                 zenoh_error_text(exc),
             )
-            return cls(vehicle_id, None, sample_field, config_snapshot)
+            return cls(vehicle_id, None, sample_field, config_snapshot, on_control)
         except asyncio.CancelledError:
             opening.add_done_callback(_close_when_opened)  # the thread cannot be stopped; undo it when done
             raise
-        bus = cls(vehicle_id, declared, sample_field, config_snapshot)
+        bus = cls(vehicle_id, declared, sample_field, config_snapshot, on_control)
         bus._query_task = asyncio.create_task(bus._serve_queries(), name=f"zenoh queries {vehicle_id}")
         logger.debug("zenoh status for vehicle %r on %s", vehicle_id, keys.status)
         return bus
@@ -175,6 +184,9 @@ class StatusBus:
                 await self._answer_field(query)
             while (query := declared.config_queryable.try_recv()) is not None:
                 _reply_and_drop(query, self.keys.config, self._config_reply)
+            if declared.control is not None and self._on_control is not None:
+                while (sample := declared.control.try_recv()) is not None:
+                    self._on_control(sample.payload.to_bytes())
             await asyncio.sleep(QUERY_POLL_S)
 
     async def _answer_field(self, query: zenoh.Query) -> None:
@@ -227,16 +239,18 @@ def _answer(query: zenoh.Query, key: str, answer: Callable[[zenoh.Query], Any]) 
 
 
 # ------------------------------------------------------------------------- blocking zenoh calls
-def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys) -> _Declared:
+def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys, control: str | None = None) -> _Declared:
     """Runs on a worker thread. On any failure, closes what it opened and re-raises."""
     session = zenoh.open(zenoh_config)
     try:
+        ring = zenoh.handlers.RingChannel(QUERY_BACKLOG)
         return _Declared(
             session=session,
             publisher=session.declare_publisher(keys.status, encoding=zenoh.Encoding.APPLICATION_JSON),
             token=session.liveliness().declare_token(keys.alive),
             field_queryable=session.declare_queryable(keys.field, zenoh.handlers.RingChannel(QUERY_BACKLOG)),
             config_queryable=session.declare_queryable(keys.config, zenoh.handlers.RingChannel(QUERY_BACKLOG)),
+            control=session.declare_subscriber(control, ring) if control is not None else None,
         )
     except BaseException:
         session.close()
@@ -245,7 +259,8 @@ def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys) -> _Declared
 
 def _undeclare_and_close(declared: _Declared) -> None:
     try:
-        for entity in (declared.token, declared.field_queryable, declared.config_queryable, declared.publisher):
+        entities = (declared.token, declared.field_queryable, declared.config_queryable, declared.publisher)
+        for entity in (*entities, *([declared.control] if declared.control is not None else [])):
             try:
                 entity.undeclare()
             except zenoh.ZError as exc:

@@ -29,6 +29,8 @@ GUIDANCE_FLAGS: tuple[Flag, ...] = (
     Flag("--heading-deg", "frame.heading_deg", float, "compass heading of the model's +x axis"),
     Flag("--max-speed", "command.max_speed_mps", float, "the field's top speed maps to this [m/s]"),
     Flag("--arm", "arm", None, "arm the vehicle after switching to GUIDED"),
+    Flag("--control-token-file", "status.control_token_file", str, "token shared with koopguide dashboard: "
+         "obey its operator hold (docs/dashboard.md)", metavar="FILE"),
 )
 
 
@@ -38,6 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=Path, help="YAML overriding config/guidance.yaml")
     add_flags(p, GUIDANCE_FLAGS)
     p.add_argument("--zenoh-config", type=Path, help="zenoh config (JSON5) replacing the loopback default")
+    p.add_argument("--log", type=Path, metavar="FILE.mcap", help="record fixes, estimates, setpoints, states and "
+                   "statuses as MCAP (render: koopguide replay FILE.mcap -o mission.gif)")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     p.set_defaults(run=cmd_run)
 
@@ -66,16 +70,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     link_settings(cfg.mavlink)  # a bad endpoint or signing key is refused with the config's other errors
     if not args.model.is_file():
         raise ConfigError(f"model file {args.model} not found")
+    if args.log is not None and (args.log.suffix.lower() != ".mcap" or not args.log.parent.is_dir()):
+        raise ConfigError(f"--log must name a .mcap file in an existing folder, got {args.log}")
     zenoh_config = load_zenoh_config(args.zenoh_config)
     setup_logging(args.verbose)
-    return asyncio.run(serve(cfg, args.model, zenoh_config))
+    return asyncio.run(serve(cfg, args.model, zenoh_config, args.log))
 
 
-async def serve(cfg: Any, model: Path, zenoh_config: Any) -> int:
+async def serve(cfg: Any, model: Path, zenoh_config: Any, log_path: Path | None = None) -> int:
     """Run the daemon until SIGINT/SIGTERM; exit code 0 after a clean shutdown."""
     from koopguide.guidance.daemon import GuidanceDaemon
 
-    daemon = await GuidanceDaemon.create(cfg, model, zenoh_config)
+    daemon = await GuidanceDaemon.create(cfg, model, zenoh_config, log_path)
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, daemon.stop)

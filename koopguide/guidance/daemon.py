@@ -16,7 +16,6 @@ Conventions: positions and velocities in local NED [m, m/s]; vehicle time [s] fr
 from __future__ import annotations
 
 import asyncio
-import collections
 import logging
 import math
 import time
@@ -27,11 +26,15 @@ import numpy as np
 
 from koopguide.base import config as config_io
 from koopguide.base.modelfile import ModelFileError
+from koopguide.bus.status import Status
 from koopguide.guidance import events as ev
 from koopguide.guidance.estimation.clock import VehicleClock
 from koopguide.guidance.field_grid import FieldGrids
+from koopguide.guidance.latency import LatencyWindow
 from koopguide.guidance.law.command import GuidanceLaw, GuidanceState
 from koopguide.guidance.link import open_link
+from koopguide.guidance.operator import OperatorControl, load_token
+from koopguide.guidance.recorder import MissionRecorder
 from koopguide.guidance.settings import ExitMode, GuidanceConfig
 from koopguide.guidance.supervisor import Supervisor
 from koopguide.guidance.vehicle_events import VehicleEvents
@@ -44,35 +47,10 @@ log = logging.getLogger(__name__)
 
 SLACK = 0.25  # of a period: the timer commands this late when no fix triggered the due command
 SHUTDOWN_WAIT_S = 2.0  # wall seconds to see the exit mode confirmed
-LATENCY_WINDOW = 2000  # fix-to-setpoint latencies kept for the percentiles
-
-
-class LatencyWindow:
-    """The latest fix-to-setpoint latencies [ms] and their percentiles."""
-
-    def __init__(self, size: int = LATENCY_WINDOW) -> None:
-        self._samples: collections.deque[float] = collections.deque(maxlen=size)
-
-    def add(self, ms: float) -> None:
-        self._samples.append(ms)
-
-    def drain(self) -> list[float]:
-        """The samples taken since the last drain (oldest first), removed from the window."""
-        out = list(self._samples)
-        self._samples.clear()
-        return out
-
-    def percentiles(self) -> dict[str, float | None]:
-        if not self._samples:
-            return {"p50": None, "p99": None}
-        p50, p99 = np.percentile(np.fromiter(self._samples, float), [50, 99])
-        return {"p50": round(float(p50), 4), "p99": round(float(p99), 4)}
-
-
 class GuidanceDaemon:
     """Build with :meth:`create`; ``await run()`` until :meth:`stop`; then it has shut down cleanly."""
 
-    def __init__(self, cfg: GuidanceConfig, model_path: Path, law: GuidanceLaw) -> None:
+    def __init__(self, cfg: GuidanceConfig, model_path: Path, law: GuidanceLaw, token: str | None = None) -> None:
         self.cfg = cfg
         self.model_path = model_path
         self.law = law
@@ -85,6 +63,8 @@ class GuidanceDaemon:
         self.latency = LatencyWindow()
         self.link: Link | None = None
         self.bus: Any = None
+        self.operator = OperatorControl(cfg.vehicle_id, token)  # the operator's hold (None token: disabled)
+        self.recorder: MissionRecorder | None = None  # --log FILE.mcap
         self.next_due = -math.inf  # vehicle time the next command is due
         self.last_cmd = np.zeros(2)  # last velocity sent [m/s]
         self.max_cmd_speed = 0.0  # largest speed ever sent [m/s]
@@ -134,8 +114,11 @@ class GuidanceDaemon:
 
     # ------------------------------------------------------------------------------ lifecycle
     @classmethod
-    async def create(cls, cfg: GuidanceConfig, model_path: Path, zenoh_config: Any | None = None) -> GuidanceDaemon:
-        """Refuse a bad model or config (ValueError) before opening anything; then open MAVLink and zenoh."""
+    async def create(
+        cls, cfg: GuidanceConfig, model_path: Path, zenoh_config: Any | None = None, log_path: Path | None = None
+    ) -> GuidanceDaemon:
+        """Refuse a bad model, config or token file (ValueError) before opening anything; then open the
+        mission log (``log_path``), MAVLink and zenoh."""
         field = load_field(model_path)
         certified, why = certificate_ok(field)
         if not certified:
@@ -144,7 +127,8 @@ class GuidanceDaemon:
                                      f"override)")
             log.warning("UNCERTIFIED MODEL %s: %s; guiding anyway (allow_uncertified)", model_path, why)
         law = GuidanceLaw.from_config(field, cfg)
-        daemon = cls(cfg, Path(model_path), law)
+        token_file = cfg.status.control_token_file
+        daemon = cls(cfg, Path(model_path), law, None if token_file is None else load_token(token_file))
         log.info(
             "model %s: domain max field speed %.4g units/step -> %.3f m/s (gain %.4g)",
             model_path,
@@ -152,13 +136,19 @@ class GuidanceDaemon:
             cfg.command.max_speed_mps,
             law.gain,
         )
-        daemon.link = await open_link(cfg.mavlink, daemon._on_message)
-        if zenoh_config is not None:
-            from koopguide.bus.status_bus import StatusBus
+        if log_path is not None:
+            daemon.recorder = MissionRecorder.create(Path(log_path), cfg, Path(model_path), daemon.supervisor)
+        try:
+            daemon.link = await open_link(cfg.mavlink, daemon._on_message)
+            if zenoh_config is not None:
+                from koopguide.bus.status_bus import StatusBus
 
-            daemon.bus = await StatusBus.create(
-                cfg.vehicle_id, zenoh_config, daemon.sample_field, daemon.config_snapshot
-            )
+                daemon.bus = await StatusBus.create(
+                    cfg.vehicle_id, zenoh_config, daemon.sample_field, daemon.config_snapshot, daemon._on_control
+                )
+        except BaseException:
+            await daemon.close()
+            raise
         daemon._cycle()  # waiting for the vehicle's heartbeat
         return daemon
 
@@ -191,6 +181,8 @@ class GuidanceDaemon:
                 await self.bus.close()
         finally:
             self.field_grids.close()
+            if self.recorder is not None:
+                self.recorder.close()
 
     async def _shutdown(self) -> None:
         """Zero velocity (at the current heading), then the exit mode (only if still in GUIDED)."""
@@ -220,19 +212,29 @@ class GuidanceDaemon:
                 self.next_due = -math.inf  # re-arm the command schedule in the new vehicle time
             if isinstance(event, ev.PositionFix):
                 if self.supervisor.on_position(event):
-                    self._after_fix(event.t_s, arrived)
+                    self._after_fix(event, arrived)
             else:
                 self.supervisor.handle(event)
         self._log_notes()
 
-    def _after_fix(self, t: float, arrived: float) -> None:
+    def _after_fix(self, fix: ev.PositionFix, arrived: float) -> None:
         # A fix within half a fix interval of the due time triggers the command (so it goes out at once).
         interval = self.supervisor.vehicle.fix_interval
         if self.clock.now() >= self.next_due - min(SLACK * self.period, 0.5 * interval):
             self._cycle(arrived)
         # After the command, off the fix-to-setpoint path (a filterpy update costs ~70 us): the current
         # changes over tens of seconds, so the command loses nothing by using the estimate one fix old.
-        self.supervisor.update_current(t)
+        self.supervisor.update_current(fix.t_s)
+        if self.recorder is not None:  # the log too, after the command
+            self.recorder.after_fix(fix)
+
+    def _on_control(self, payload: bytes) -> None:
+        """An operator's request from zenoh (on the event loop): verified, then the supervisor's."""
+        event = self.operator.receive(payload, time.time(), time.monotonic())
+        if event is not None:
+            self.supervisor.handle(event)
+            self._cycle()  # at once: a hold's zero velocity goes out now, not at the next command
+        self._log_notes()
 
     # ------------------------------------------------------------------------------ decisions
     def _tick(self) -> ev.Tick:
@@ -284,6 +286,8 @@ class GuidanceDaemon:
             self.setpoints_sent += 1
             self.max_cmd_speed = max(self.max_cmd_speed, float(np.hypot(*v)))
             self.supervisor.setpoint_sent(self.clock.now())
+            if self.recorder is not None:
+                self.recorder.setpoint(self.clock.now(), v, yaw)
             return True
         return False
 
@@ -313,14 +317,22 @@ class GuidanceDaemon:
     async def _status_loop(self) -> None:
         period = 1.0 / self.cfg.status.rate_hz
         while True:
-            if self.bus is not None:
+            if self.bus is not None or self.recorder is not None:
                 self._seq += 1
-                self.bus.publish(self.status())
+                status = self.status()
+                if self.bus is not None:
+                    self.bus.publish(status)
+                if self.recorder is not None:
+                    await self.recorder.status(status, self.law.sample_grid)
             await asyncio.sleep(period)
 
     # ------------------------------------------------------------------------------ status
     def status(self) -> dict[str, Any]:
-        """The status document (docs: koopguide.bus.status): NED metres, m/s, seconds."""
+        """The status as the JSON object that is published (:meth:`status_document`)."""
+        return self.status_document().to_dict()
+
+    def status_document(self) -> Status:
+        """The status (:class:`koopguide.bus.status.Status`, docs/zenoh.md): NED metres, m/s, seconds."""
         now, sup = self.clock.now(), self.supervisor
         position = velocity = distance = None
         estimate = sup.vehicle.estimate(now)
@@ -333,32 +345,25 @@ class GuidanceDaemon:
         age = self.position_age()
         link = self.link.stats if self.link is not None else None
         current = sup.vehicle.current
-        return {
-            "t": time.time(),
-            "seq": self._seq,
-            "vehicle_id": self.cfg.vehicle_id,
-            "state": sup.state.value,
-            "reason": sup.reason,
-            "degraded": self.degraded,
-            "mode": rover.mode_name(sup.mode),
-            "armed": sup.armed,
-            "position_ned": position,
-            "velocity_ned": velocity,
-            "goal_ned": _rounded(self.law.goal_ned) if sup.goal_placed else None,
-            "distance_to_goal_m": distance,
-            "cmd_velocity_ned": _rounded(self.last_cmd),
-            "speed_limit_mps": self.cfg.command.max_speed_mps,
-            "position_age_s": None if age is None else round(age, 4),
-            "loop_latency_ms": self.latency.percentiles(),
-            "model": str(self.model_path),
+        extras = {
             "vehicle_time_s": round(now, 3),
             "rejected_inputs": self.rejected_inputs,
             "current_ned": _rounded(current.current_ned) if current.updates else None,
+            "control_ack": self.operator.ack,
+            "control_refused": self.operator.refused,
             "link": {"up": sup.link_up(time.monotonic()), "received": link.received, "foreign": link.foreign,
                      "corrupt": link.corrupt, "sent": link.sent, "reconnects": link.reconnects,
                      "unsigned": link.unsigned, "bad_signature": link.bad_signature,
                      "wrong_source": link.wrong_source, "source_changes": link.source_changes} if link else None,
         }
+        return Status(
+            t=time.time(), seq=self._seq, vehicle_id=self.cfg.vehicle_id, state=sup.state.value, reason=sup.reason,
+            degraded=self.degraded, mode=rover.mode_name(sup.mode), armed=sup.armed, position_ned=position,
+            velocity_ned=velocity, goal_ned=_rounded(self.law.goal_ned) if sup.goal_placed else None,
+            distance_to_goal_m=distance, cmd_velocity_ned=_rounded(self.last_cmd),
+            speed_limit_mps=self.cfg.command.max_speed_mps, position_age_s=None if age is None else round(age, 4),
+            loop_latency_ms=self.latency.percentiles(), model=str(self.model_path), extras=extras,
+        )
 
     async def sample_field(self, params: dict[str, str]) -> bytes:
         """The field on a grid in NED for the ``field`` queryable (JSON bytes); ``n`` = grid points per axis."""

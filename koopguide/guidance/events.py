@@ -65,6 +65,15 @@ class InputRejected:
 
 
 @dataclass(frozen=True)
+class OperatorHold:
+    """An operator's verified request (koopguide.bus.control): hold (zero velocity) or resume guiding."""
+
+    wall_s: float  # arrival [s]
+    active: bool  # True: hold until resumed; False: resume
+    source: str  # who asked, e.g. "dashboard@host" (one line, at most 64 characters)
+
+
+@dataclass(frozen=True)
 class Tick:
     """Time for a decision: the vehicle time now and the wall time now."""
 
@@ -72,7 +81,7 @@ class Tick:
     t_s: float  # vehicle time now [s]
 
 
-Event = Heartbeat | PositionFix | Attitude | GlobalFix | ClockRestart | InputRejected | Tick
+Event = Heartbeat | PositionFix | Attitude | GlobalFix | ClockRestart | InputRejected | OperatorHold | Tick
 
 
 @dataclass(frozen=True)

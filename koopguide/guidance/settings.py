@@ -166,6 +166,7 @@ class LimitSettings:
 class StatusSettings:
     rate_hz: Rate
     field_grid: Annotated[int, Range(2, 200)]
+    control_token_file: Path | None  # the operator's shared token (docs/dashboard.md); null: control disabled
 
 
 @dataclass(frozen=True)

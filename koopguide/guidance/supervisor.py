@@ -69,6 +69,7 @@ class Supervisor:
         self.schedule = RequestSchedule(cfg)  # mode, arm and telemetry requests, and their retries
         self.transitions: list[tuple[float, str]] = []  # (vehicle time, state) on each change
         self.restarts = 0  # vehicle clock restarts seen (reboots and jumps)
+        self.operator_hold: str | None = None  # who holds the boat (an operator's request); None: not held
         self._notes: list[ev.Note] = []
 
     # ------------------------------------------------------------------------------ events
@@ -89,6 +90,8 @@ class Supervisor:
             self.on_clock_restart(event)
         elif isinstance(event, ev.InputRejected):
             self.vehicle.gate.reject(event.kind, event.detail, event.wall_s)
+        elif isinstance(event, ev.OperatorHold):
+            self.on_operator(event)
         return None
 
     def on_heartbeat(self, hb: ev.Heartbeat) -> None:
@@ -139,6 +142,17 @@ class Supervisor:
         if restart.rebooted:
             self.engaged = False  # a rebooted vehicle's mode is not the pilot's choice: take GUIDED again
 
+    def on_operator(self, request: ev.OperatorHold) -> None:
+        """An operator's hold (zero velocity, state hold, until resumed) or resume (guide again, progress
+        watched afresh: the boat stood still on purpose)."""
+        if request.active:
+            self._note(logging.WARNING, f"operator hold from {request.source}")
+            self.operator_hold = request.source
+        elif self.operator_hold is not None:
+            self._note(logging.INFO, f"operator resume from {request.source} (held by {self.operator_hold})")
+            self.operator_hold = None
+            self.progress.reset()
+
     def setpoint_sent(self, t: float) -> None:
         """The service put a setpoint on the wire at vehicle time ``t``."""
         self.last_sent_t = t
@@ -180,6 +194,8 @@ class Supervisor:
                 )
             return self._out(ZERO, S.WAITING, "no vehicle heartbeat", send=False, t=now)
         requests = self.schedule.streams(self.position_age(now), wall)
+        if self.operator_hold is not None:  # before everything but the link: no mode change, no arming
+            return self._out(ZERO, S.HOLD, f"operator hold ({self.operator_hold})", in_guided, now, requests)
         age = self.position_age(now)
         if age is None:
             return self._out(ZERO, S.WAITING, "waiting for LOCAL_POSITION_NED", in_guided, now, requests)

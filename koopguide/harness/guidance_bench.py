@@ -137,14 +137,16 @@ def scenario(model: Path, rate_hz: float, seconds: float) -> Scenario:
 
 
 # ------------------------------------------------------------------------------------------ measurement
-async def measure_rate(model: Path, rate_hz: float, seconds: float) -> RateFigures:
-    """Start the simulator and the daemon, warm up to guiding, measure one window, stop both."""
+async def measure_rate(model: Path, rate_hz: float, seconds: float, log_dir: Path | None = None) -> RateFigures:
+    """Start the simulator and the daemon, warm up to guiding, measure one window, stop both; with
+    ``log_dir``, the daemon writes its mission log there (``koopguide run --log``)."""
     from koopguide.guidance.daemon import GuidanceDaemon
     from koopguide.guidance.law.command import GuidanceState
     from sitl.process import SimulatorProcess
 
     setup = scenario(model, rate_hz, seconds)
-    daemon = await GuidanceDaemon.create(setup.cfg, model, zenoh_config=None)
+    log_path = None if log_dir is None else log_dir / f"bench-{rate_hz:g}hz.mcap"
+    daemon = await GuidanceDaemon.create(setup.cfg, model, zenoh_config=None, log_path=log_path)
     runner = asyncio.create_task(daemon.run())
     simulator = SimulatorProcess(setup.sim_overrides, start_timeout_s=SIM_START_TIMEOUT_S)
     sim_started = False
@@ -215,8 +217,8 @@ async def _stopped(runner: asyncio.Task, rate_hz: float) -> None:
         raise BenchError(f"{rate_hz:g} Hz: the daemon did not shut down within {SHUTDOWN_TIMEOUT_S:g} s") from None
 
 
-async def measure(model: Path, rates_hz: list[float], seconds: float) -> list[RateFigures]:
-    return [await measure_rate(model, rate, seconds) for rate in rates_hz]
+async def measure(model: Path, rates_hz: list[float], seconds: float, log_dir: Path | None = None) -> list[RateFigures]:
+    return [await measure_rate(model, rate, seconds, log_dir) for rate in rates_hz]
 
 
 # ------------------------------------------------------------------------------------------ report
@@ -262,6 +264,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rates", type=rate_list, default=list(DEFAULT_RATES_HZ),
                         help="command rates in Hz, comma-separated (default 10,50)")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
+    parser.add_argument("--log", action="store_true", help="the daemon writes a mission log (koopguide run --log) "
+                        "to a temporary folder: the cost of logging")
     args = parser.parse_args(argv)
     if not args.seconds > 0:
         parser.error(f"--seconds must be > 0, got {args.seconds:g}")
@@ -270,12 +274,13 @@ def main(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory(prefix="koopguide-bench-") as workdir:
             model = trained_model(args.model, Path(workdir))
             model_label = str(model) if model.parent != Path(workdir) else "Zshape trained for this run (deleted)"
-            figures = asyncio.run(measure(model, args.rates, args.seconds))
+            figures = asyncio.run(measure(model, args.rates, args.seconds, Path(workdir) if args.log else None))
     except BenchError as exc:
         print(f"koopguide bench guidance: error: {exc}", file=sys.stderr)
         return 1
     machine = {"cpu_count": os.cpu_count(), "python": platform.python_version(),
-               "platform": platform.platform(terse=True), "model": model_label, "seconds": args.seconds}
+               "platform": platform.platform(terse=True), "model": model_label, "seconds": args.seconds,
+               "mission_log": args.log}
     target = verdict(figures)
     if args.json:
         print(json.dumps({**machine, "rates": [asdict(f) for f in figures], "target": target}, indent=2))

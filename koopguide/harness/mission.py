@@ -73,13 +73,14 @@ class MissionResult:
 
 
 async def fly(cfg: GuidanceConfig, model: Path, sim_cfg: Any, timeout_s: float, settle_s: float = 20.0,
-              zenoh_config: Any | None = None, progress: bool = False) -> MissionResult:
-    """Run one mission: until arrival plus ``settle_s`` simulated seconds, or ``timeout_s`` after start."""
+              zenoh_config: Any | None = None, progress: bool = False, log_path: Path | None = None) -> MissionResult:
+    """Run one mission: until arrival plus ``settle_s`` simulated seconds, or ``timeout_s`` after start;
+    ``log_path``: the service's mission log (MCAP, as ``koopguide run --log``)."""
     from koopguide.guidance.daemon import GuidanceDaemon
     from sitl.runner import SimulationThread
 
     records: list[dict[str, Any]] = []
-    daemon = await GuidanceDaemon.create(cfg, model, zenoh_config)
+    daemon = await GuidanceDaemon.create(cfg, model, zenoh_config, log_path)
     runner = asyncio.create_task(daemon.run())
     try:
         with SimulationThread(sim_cfg, records):
@@ -179,11 +180,14 @@ def demo_mission(model: Path, start_index: int, current_mps: float, speedup: flo
 
 
 def run_demo(args: Any) -> int:
-    """``koopguide demo``: train Zshape if no cached model, fly the mission in the simulator, plot it."""
+    """``koopguide demo``: train Zshape if no cached model, fly the mission in the simulator (logged as MCAP),
+    plot it and animate its log."""
     import logging
 
     from koopguide.base import data
+    from koopguide.bus.missionlog import read_mission
     from koopguide.bus.zenoh_config import load_zenoh_config
+    from koopguide.dashboard.replay import render_replay
     from koopguide.harness.mission_plot import plot_mission
     from koopguide.model.learn.export import train_to_file
     from sitl.flow import Flow
@@ -201,8 +205,9 @@ def run_demo(args: Any) -> int:
     print(f"koopguide demo: boat at N {pose[0]:.2f} E {pose[1]:.2f} m heading {pose[2]:.0f} deg, goal N 0 E 0, "
           f"current {args.current_mps:.2f} m/s toward north, simulator x{args.speedup:g}; "
           f"status on zenoh koopguide/{cfg.vehicle_id}/status (watch: koopguide monitor)", file=sys.stderr)
+    log = args.out / "demo.mcap"
     result = asyncio.run(fly(cfg, model, sim_cfg, args.timeout_s, settle_s=DEMO_SETTLE_S,
-                             zenoh_config=zenoh_config, progress=True))
+                             zenoh_config=zenoh_config, progress=True, log_path=log))
     world = sim_cfg.world
     box = np.array([[world.north_m[0], world.east_m[0]], [world.north_m[1], world.east_m[1]]])
     flow = Flow(sim_cfg.flow, np.random.default_rng(0))
@@ -211,8 +216,10 @@ def run_demo(args: Any) -> int:
                else f"did not arrive within {args.timeout_s:g} s")
     plot_mission(png, result.law.field_velocity_ned, box, result.track, pose[:2], cfg.frame.goal_ned,
                  cfg.arrival.radius_m, lambda n, e: flow.velocity(n, e, 0.0), f"koopguide demo: Zshape, {verdict}")
+    gif = args.out / "demo.gif"
+    frames = render_replay(read_mission(log), gif)
     after = result.max_distance_after_arrival_m
     print(f"koopguide demo: {verdict}; largest setpoint {result.max_setpoint_mps:.3f} m/s"
           + (f"; within {after:.2f} m of the goal for {DEMO_SETTLE_S:.0f} s after arrival" if after is not None else "")
-          + f"; wrote {png}", file=sys.stderr)
+          + f"; wrote {png}, {log} and {gif} ({frames} frames)", file=sys.stderr)
     return 0 if result.arrived else 1
