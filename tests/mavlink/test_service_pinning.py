@@ -69,7 +69,7 @@ def test_a_100_hz_position_spoofer_and_manual_heartbeats_from_another_address_ar
                 errors.append(estimate_error(daemon, boat))
                 states.append(daemon.state.value)
             spoofer.close()
-            assert set(states) == {"guiding"} and daemon.view.mode == rover.GUIDED
+            assert set(states) == {"guiding"} and daemon.supervisor.mode == rover.GUIDED
             assert max(errors) < 0.3, f"the estimate followed the spoofer (max error {max(errors):.2f} m)"
             assert daemon.link.stats.wrong_source >= 160 and daemon.link.stats.source_changes == 0
 

@@ -120,7 +120,7 @@ def test_a_keyed_service_does_not_trust_an_unsigned_vehicle(zshape_model: Path, 
         try:
             with ScriptedVehicle(port, start_ned=(1.5, -1.5)) as boat:
                 await until(lambda: daemon.link.stats.unsigned >= 40, 10.0)
-                assert daemon.state.value == "waiting" and daemon.view.heartbeat_wall is None
+                assert daemon.state.value == "waiting" and daemon.supervisor.heartbeat_wall is None
                 assert daemon.link.stats.received == 0 and boat.setpoints() == []
         finally:
             daemon.stop()
