@@ -18,7 +18,7 @@ import enum
 import math
 
 from koopguide.mavlink.rover import MODE_NAMES, MODE_NUMBERS  # Rover mode numbers
-from sitl.config import AutopilotConfig, RoverMode, VehicleKind
+from sitl.config import AutopilotConfig, SimulatedMode, VehicleKind
 from sitl.guided import (  # noqa: F401 - re-exported: the names sitl.inbound and the tests use
     Frame,
     GuidedTarget,
@@ -30,7 +30,7 @@ from sitl.guided import (  # noqa: F401 - re-exported: the names sitl.inbound an
 from sitl.parameters import ParamStore
 from sitl.steering import ControllerState, Steering
 
-SUPPORTED_MODES = frozenset(MODE_NUMBERS[m.value] for m in RoverMode)
+SUPPORTED_MODES = frozenset(MODE_NUMBERS[m.value] for m in SimulatedMode)
 MODES_NEEDING_POSITION = frozenset(MODE_NUMBERS[m] for m in ("LOITER", "GUIDED", "RTL"))
 AUTOPILOT_MODES = frozenset(MODE_NUMBERS[m] for m in ("AUTO", "GUIDED", "LOITER", "RTL", "SMART_RTL"))
 MANUAL_INPUT_MODES = frozenset(MODE_NUMBERS[m] for m in ("MANUAL", "ACRO", "STEERING"))

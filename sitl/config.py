@@ -22,6 +22,7 @@ from typing import Annotated, Any
 
 from koopguide.base import config as config_loader
 from koopguide.base.config import ConfigError, Range, check
+from koopguide.mavlink.rover import SIMULATED_MODES
 
 # Intervals shared by several keys (closed ends unless marked open).
 Hertz = Annotated[float, Range(0.0, 1000.0, lo_open=True)]  # an update rate, (0, 1000] [Hz]
@@ -61,14 +62,9 @@ class VehicleKind(enum.Enum):
     VECTORED = "vectored"  # the thruster pair plus bow and stern tunnel thrusters: can thrust sideways
 
 
-class RoverMode(enum.Enum):
-    """ArduPilot Rover mode numbers (HEARTBEAT custom_mode) that the simulator can enter."""
-
-    MANUAL = "MANUAL"
-    HOLD = "HOLD"
-    LOITER = "LOITER"
-    GUIDED = "GUIDED"
-    RTL = "RTL"
+#: The Rover modes (koopguide.mavlink.rover, the one table of mode numbers) that the simulator implements,
+#: by name: the values ``autopilot.initial_mode`` may take.
+SimulatedMode = enum.Enum("SimulatedMode", {m.name: m.name for m in SIMULATED_MODES})
 
 
 @dataclass(frozen=True)
@@ -260,7 +256,7 @@ class AutopilotParams:
 
 @dataclass(frozen=True)
 class AutopilotConfig:
-    initial_mode: RoverMode  # mode at boot (ArduPilot INITIAL_MODE)
+    initial_mode: SimulatedMode  # mode at boot (ArduPilot INITIAL_MODE)
     start_armed: bool  # boot armed (tests and scripted runs; ArduPilot boots disarmed)
     control_rate_hz: Hertz  # heading/speed controller rate [Hz]
     params: AutopilotParams

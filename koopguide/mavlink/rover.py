@@ -36,9 +36,9 @@ class RoverMode(enum.IntEnum):
 
 MODE_NUMBERS = {mode.name: int(mode) for mode in RoverMode}
 MODE_NAMES = {number: name for name, number in MODE_NUMBERS.items()}
-MANUAL, HOLD, LOITER, GUIDED, RTL = (
-    int(m) for m in (RoverMode.MANUAL, RoverMode.HOLD, RoverMode.LOITER, RoverMode.GUIDED, RoverMode.RTL)
-)
+#: The modes the bundled simulator implements (and the service uses).
+SIMULATED_MODES = (RoverMode.MANUAL, RoverMode.HOLD, RoverMode.LOITER, RoverMode.GUIDED, RoverMode.RTL)
+MANUAL, HOLD, LOITER, GUIDED, RTL = (int(m) for m in SIMULATED_MODES)
 
 # POSITION_TARGET_TYPEMASK bits of SET_POSITION_TARGET_*: a set bit means "ignore this field".
 POS_IGNORE = 0x7  # X, Y, Z
