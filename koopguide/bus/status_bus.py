@@ -8,6 +8,8 @@ Keys for vehicle ``<id>`` (DESIGN.md, "Zenoh status"):
                             dict of strings, the reply is its result as JSON; a ValueError it raises
                             becomes an error reply carrying the message
 ``koopguide/<id>/config``   queryable; the reply is ``config_snapshot()`` as JSON
+``koopguide/*/status``      subscribed only with ``listen_to_others``: the other vehicles' statuses (fleets),
+                            drained with :meth:`StatusBus.take_others`
 
 Zenoh is optional for guidance: if the session cannot be opened or an entity cannot be declared,
 :meth:`StatusBus.create` logs one warning and returns a disabled bus whose :meth:`publish` does
@@ -32,7 +34,7 @@ from typing import Any
 
 import zenoh
 
-from koopguide.bus.status import encode_status, validate_vehicle_id
+from koopguide.bus.status import StatusFormatError, decode_status, encode_status, validate_vehicle_id
 from koopguide.bus.zenoh_config import load_zenoh_config, zenoh_error_text
 
 __all__ = ["QUERY_POLL_S", "StatusBus", "StatusKeys", "load_zenoh_config"]
@@ -45,6 +47,8 @@ APP = "koopguide"
 QUERY_POLL_S = 0.02
 #: Queries waiting beyond this many per queryable are dropped, oldest first (the asker sees no reply).
 QUERY_BACKLOG = 16
+#: Other vehicles' statuses waiting beyond this many are dropped, oldest first.
+OTHERS_BACKLOG = 64
 
 SampleField = Callable[[dict[str, str]], dict]
 ConfigSnapshot = Callable[[], dict]
@@ -72,6 +76,7 @@ class _Declared:
     token: zenoh.LivelinessToken
     field_queryable: zenoh.Queryable
     config_queryable: zenoh.Queryable
+    others: zenoh.Subscriber | None = None  # koopguide/*/status, in a ring channel
 
 
 class StatusBus:
@@ -102,13 +107,15 @@ class StatusBus:
         zenoh_config: zenoh.Config,
         sample_field: SampleField,
         config_snapshot: ConfigSnapshot,
+        listen_to_others: bool = False,
     ) -> StatusBus:
         """Open the session off the event loop and declare everything; disabled (not raised) on failure.
+        ``listen_to_others``: also subscribe to every vehicle's status (read with :meth:`take_others`).
 
         A malformed ``vehicle_id`` is the caller's error and raises ValueError.
         """
         keys = StatusKeys.for_vehicle(vehicle_id)
-        opening = asyncio.ensure_future(asyncio.to_thread(_open_and_declare, zenoh_config, keys))
+        opening = asyncio.ensure_future(asyncio.to_thread(_open_and_declare, zenoh_config, keys, listen_to_others))
         try:
             declared = await asyncio.shield(opening)
         except (zenoh.ZError, OSError) as exc:
@@ -168,6 +175,23 @@ class StatusBus:
             self._put_failing = False
             logger.info("zenoh put on %s works again after %d failures", self.keys.status, self.put_failures)
 
+    def take_others(self) -> list[dict[str, Any]]:
+        """The other vehicles' statuses received since the last call (oldest first; own id and malformed
+        payloads left out). Call on the event loop; never blocks."""
+        declared = self._declared
+        if declared is None or declared.others is None:
+            return []
+        out = []
+        while (sample := declared.others.try_recv()) is not None:
+            try:
+                status = decode_status(sample.payload.to_bytes())
+            except StatusFormatError as exc:
+                logger.debug("ignoring a malformed status on %s: %s", sample.key_expr, exc)
+                continue
+            if status["vehicle_id"] != self.vehicle_id:
+                out.append(status)
+        return out
+
     # --------------------------------------------------------------------------------- queries
     async def _serve_queries(self) -> None:
         while (declared := self._declared) is not None:
@@ -214,16 +238,19 @@ def _answer(query: zenoh.Query, key: str, answer: Callable[[zenoh.Query], Any]) 
 
 
 # ------------------------------------------------------------------------- blocking zenoh calls
-def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys) -> _Declared:
+def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys, listen_to_others: bool = False) -> _Declared:
     """Runs on a worker thread. On any failure, closes what it opened and re-raises."""
     session = zenoh.open(zenoh_config)
     try:
+        others = (session.declare_subscriber(f"{APP}/*/status", zenoh.handlers.RingChannel(OTHERS_BACKLOG))
+                  if listen_to_others else None)
         return _Declared(
             session=session,
             publisher=session.declare_publisher(keys.status, encoding=zenoh.Encoding.APPLICATION_JSON),
             token=session.liveliness().declare_token(keys.alive),
             field_queryable=session.declare_queryable(keys.field, zenoh.handlers.RingChannel(QUERY_BACKLOG)),
             config_queryable=session.declare_queryable(keys.config, zenoh.handlers.RingChannel(QUERY_BACKLOG)),
+            others=others,
         )
     except BaseException:
         session.close()
@@ -232,7 +259,8 @@ def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys) -> _Declared
 
 def _undeclare_and_close(declared: _Declared) -> None:
     try:
-        for entity in (declared.token, declared.field_queryable, declared.config_queryable, declared.publisher):
+        entities = (declared.token, declared.field_queryable, declared.config_queryable, declared.publisher)
+        for entity in entities + ((declared.others,) if declared.others is not None else ()):
             try:
                 entity.undeclare()
             except zenoh.ZError as exc:

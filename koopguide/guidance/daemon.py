@@ -42,6 +42,7 @@ log = logging.getLogger(__name__)
 SLACK = 0.25  # of a period: the timer commands this late when no fix triggered the due command
 SHUTDOWN_WAIT_S = 2.0  # wall seconds to see the exit mode confirmed
 LATENCY_WINDOW = 2000  # fix-to-setpoint latencies kept for the percentiles
+NEIGHBOUR_POLL_S = 0.02  # how often the other vehicles' statuses are drained [s]
 
 
 class LatencyWindow:
@@ -146,7 +147,8 @@ class GuidanceDaemon:
             from koopguide.bus.status_bus import StatusBus
 
             daemon.bus = await StatusBus.create(
-                cfg.vehicle_id, zenoh_config, daemon.sample_field, daemon.config_snapshot
+                cfg.vehicle_id, zenoh_config, daemon.sample_field, daemon.config_snapshot,
+                listen_to_others=cfg.fleet.enabled,
             )
         daemon._cycle()  # waiting for the vehicle's heartbeat
         return daemon
@@ -160,6 +162,7 @@ class GuidanceDaemon:
             asyncio.create_task(self._control_loop()),
             asyncio.create_task(self._heartbeat_loop()),
             asyncio.create_task(self._status_loop()),
+            asyncio.create_task(self._neighbour_loop()),
         ]
         try:
             await self._stop.wait()
@@ -304,6 +307,19 @@ class GuidanceDaemon:
                 self.bus.publish(self.status())
             await asyncio.sleep(period)
 
+    async def _neighbour_loop(self) -> None:
+        """The other vehicles' statuses (zenoh ring channel, drained here on the loop) to the supervisor."""
+        while self.bus is not None and self.cfg.fleet.enabled:
+            for other in self.bus.take_others():
+                age = max(0.0, time.time() - other["t"])  # publication to now, wall clocks [s]
+                if other["position_ned"] is None or other["velocity_ned"] is None:
+                    continue
+                if age <= self.cfg.fleet.neighbour_timeout_s:
+                    self.supervisor.handle(ev.NeighbourStatus(time.monotonic(), other["vehicle_id"],
+                                                              tuple(other["position_ned"]),
+                                                              tuple(other["velocity_ned"]), age))
+            await asyncio.sleep(NEIGHBOUR_POLL_S)
+
     # ------------------------------------------------------------------------------ status
     def status(self) -> dict[str, Any]:
         """The status document (docs: koopguide.bus.status): NED metres, m/s, seconds."""
@@ -338,6 +354,7 @@ class GuidanceDaemon:
             "loop_latency_ms": self.latency.percentiles(),
             "model": str(self.model_path),
             "vehicle_time_s": round(now, 3),
+            "separation_active": sup.separation_active,
             "rejected_inputs": self.rejected_inputs,
             "current_ned": _rounded(current.current_ned) if current.updates else None,
             "link": {"up": sup.link_up(time.monotonic()), "received": link.received, "foreign": link.foreign,

@@ -72,7 +72,18 @@ class Tick:
     t_s: float  # vehicle time now [s]
 
 
-Event = Heartbeat | PositionFix | Attitude | GlobalFix | ClockRestart | InputRejected | Tick
+@dataclass(frozen=True)
+class NeighbourStatus:
+    """Another vehicle's status heard on zenoh (koopguide/<id>/status), for the separation filter."""
+
+    wall_s: float  # arrival [s, service monotonic clock]
+    vehicle_id: str
+    position_ned: tuple[float, float]  # (N, E) [m] when it was published
+    velocity_ned: tuple[float, float]  # (vN, vE) [m/s]
+    age_s: float  # how old the status was on arrival (publication to arrival, wall clocks) [s]
+
+
+Event = Heartbeat | PositionFix | Attitude | GlobalFix | ClockRestart | InputRejected | Tick | NeighbourStatus
 
 
 @dataclass(frozen=True)

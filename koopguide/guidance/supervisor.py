@@ -25,6 +25,7 @@ from koopguide.guidance import events as ev
 from koopguide.guidance.estimation.progress import ProgressWatchdog
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceLaw, GuidanceState, along_current
 from koopguide.guidance.law.station import StationKeeper
+from koopguide.guidance.neighbours import Neighbours
 from koopguide.guidance.requests import RequestSchedule
 from koopguide.guidance.settings import ArrivalAction, GuidanceConfig
 from koopguide.guidance.vehicle_state import VehicleState
@@ -70,6 +71,10 @@ class Supervisor:
         self.transitions: list[tuple[float, str]] = []  # (vehicle time, state) on each change
         self.restarts = 0  # vehicle clock restarts seen (reboots and jumps)
         self._notes: list[ev.Note] = []
+        self.neighbours = Neighbours(cfg.vehicle_id, cfg.fleet, cfg.command.max_speed_mps)  # other boats heard
+        self.separation_active = False  # the last setpoint was changed to keep min_separation_m
+        self.closest_neighbour_m: float | None = None  # [m] at the last setpoint
+        self._wall = -math.inf  # the service clock of the decision being made [s]
 
     # ------------------------------------------------------------------------------ events
     def handle(self, event: ev.Event) -> ev.Decision | None:
@@ -89,6 +94,8 @@ class Supervisor:
             self.on_clock_restart(event)
         elif isinstance(event, ev.InputRejected):
             self.vehicle.gate.reject(event.kind, event.detail, event.wall_s)
+        elif isinstance(event, ev.NeighbourStatus):
+            self.neighbours.hear(event)
         return None
 
     def on_heartbeat(self, hb: ev.Heartbeat) -> None:
@@ -170,6 +177,7 @@ class Supervisor:
 
     def decide(self, tick: ev.Tick) -> ev.Decision:
         now, wall, cfg = tick.t_s, tick.wall_s, self.cfg
+        self._wall = wall
         in_guided = self.mode == rover.GUIDED
         if not self.link_up(wall):
             if self.link_was_up:
@@ -337,6 +345,9 @@ class Supervisor:
     ) -> ev.Decision:
         if self.output_fault and state in (S.GUIDING, S.ARRIVED):
             state, reason = S.FAULT, f"setpoints are not going out ({self.reason})"
+        self.separation_active = False
+        if send and state in (S.GUIDING, S.ARRIVED) and self.cfg.fleet.enabled:
+            v, reason = self._keep_separation(v, reason, t)
         self._set_state(state, reason, t)
         velocity = (float(v[0]), float(v[1])) if send else None
         yaw = None
@@ -347,6 +358,15 @@ class Supervisor:
             elif not moving and self.cfg.failsafe.zero_with_yaw:
                 yaw = self.vehicle.heading_rad  # speed 0 at the current heading: Rover would otherwise turn north
         return ev.Decision(velocity, yaw, state, reason, self.degraded and state is S.GUIDING, tuple(requests))
+
+    def _keep_separation(self, v: tuple[float, float], reason: str, t: float) -> tuple[tuple[float, float], str]:
+        """The setpoint filtered to keep fleet.min_separation_m from the boats heard lately (law/separation.py)."""
+        estimate = self.vehicle.estimate(t)
+        if estimate is None:
+            return v, reason
+        out = self.neighbours.keep_separation(estimate[0], v, self._wall)
+        self.separation_active, self.closest_neighbour_m = out.active, out.closest_m
+        return out.velocity_ned, f"{reason}; {out.note}" if out.active else reason
 
     def zero_setpoint(self) -> tuple[tuple[float, float], float | None]:
         """Zero velocity, and the yaw that goes with it (the current heading, when so configured and known)."""
