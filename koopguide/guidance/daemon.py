@@ -314,8 +314,9 @@ class GuidanceDaemon:
                 age = max(0.0, time.time() - other["t"])  # publication to now, wall clocks [s]
                 if other["position_ned"] is None or other["velocity_ned"] is None:
                     continue
-                if age <= self.cfg.fleet.neighbour_timeout_s:
-                    self.supervisor.handle(ev.NeighbourStatus(time.monotonic(), other["vehicle_id"],
+                if age <= self.cfg.fleet.neighbour_timeout_s:  # in vehicle time: age x the clock's rate
+                    t_s = self.clock.now() - age * self.clock.rate
+                    self.supervisor.handle(ev.NeighbourStatus(time.monotonic(), t_s, other["vehicle_id"],
                                                               tuple(other["position_ned"]),
                                                               tuple(other["velocity_ned"]), age))
             await asyncio.sleep(NEIGHBOUR_POLL_S)

@@ -3,8 +3,9 @@
 The service feeds :class:`~koopguide.guidance.events.NeighbourStatus` events (other vehicles' zenoh
 statuses); :meth:`Neighbours.keep_separation` forgets those older than ``fleet.neighbour_timeout_s``,
 moves each on at its last velocity to now, and filters the setpoint with the barrier-function filter of
-:mod:`koopguide.guidance.law.separation`. Conventions: local NED [m], [m/s]; ``wall_s`` the service's
-monotonic clock [s].
+:mod:`koopguide.guidance.law.separation`. Conventions: local NED [m], [m/s]; the timeout is in wall
+seconds (how long ago it was heard), the move-on in this vehicle's time [s] (so a simulator at speed-up X
+moves the others on at X times the wall clock, as it moves the boats).
 """
 
 from __future__ import annotations
@@ -16,6 +17,9 @@ import numpy as np
 from koopguide.guidance import events as ev
 from koopguide.guidance.law import separation
 from koopguide.guidance.settings import FleetSettings
+
+MARGIN_M = 0.1  # the barrier keeps this much beyond min_separation_m: a boat does not turn or stop at once [m]
+TURN_SPEED_MPS = 0.02  # while turning toward the filtered direction the speed floor (keeps the direction) [m/s]
 
 
 @dataclass(frozen=True)
@@ -35,13 +39,15 @@ class Neighbours:
         if status.vehicle_id != self.own_id:
             self.latest[status.vehicle_id] = status
 
-    def current(self, wall_s: float) -> list[separation.Neighbour]:
-        """The boats heard within the timeout, each moved on at its last velocity to ``wall_s``."""
+    def current(self, t_s: float, wall_s: float) -> list[separation.Neighbour]:
+        """The boats heard within the timeout (wall ``wall_s``), each moved on at its last velocity to vehicle
+        time ``t_s``."""
 
         def age(n: ev.NeighbourStatus) -> float:
-            return n.age_s + wall_s - n.wall_s
+            return max(0.0, t_s - n.t_s)
 
-        self.latest = {k: n for k, n in self.latest.items() if age(n) <= self.fleet.neighbour_timeout_s}
+        timeout = self.fleet.neighbour_timeout_s
+        self.latest = {k: n for k, n in self.latest.items() if n.age_s + wall_s - n.wall_s <= timeout}
         return [
             separation.Neighbour(
                 n.vehicle_id,
@@ -51,8 +57,13 @@ class Neighbours:
             for n in self.latest.values()
         ]
 
-    def keep_separation(self, position_ned: np.ndarray, v: tuple[float, float], wall_s: float) -> Filtered:
-        others = self.current(wall_s)
+    def keep_separation(
+        self, position_ned: np.ndarray, v: tuple[float, float], t_s: float, wall_s: float, heading_rad: float | None
+    ) -> Filtered:
+        """Filter ``v`` [m/s]; while the filter is active and the bow points more than 90 deg off the filtered
+        velocity, slow down to turn first (a boat drives on along its heading while it turns toward a new
+        direction: at full speed that is toward the boat it must avoid)."""
+        others = self.current(t_s, wall_s)
         if not others:
             return Filtered(v, False, "", None)
         fleet = self.fleet
@@ -61,7 +72,7 @@ class Neighbours:
             position_ned,
             np.array(v),
             others,
-            fleet.min_separation_m,
+            fleet.min_separation_m + MARGIN_M,
             fleet.barrier_gain_per_s,
             self.max_speed_mps,
         )
@@ -69,4 +80,9 @@ class Neighbours:
             return Filtered(v, False, "", out.closest_m)
         who = f", yielding to {', '.join(out.yielding_to)}" if out.yielding_to else ""
         note = f"separation active: nearest boat {out.closest_m:.2f} m (min {fleet.min_separation_m:g}){who}"
-        return Filtered((float(out.velocity_ned[0]), float(out.velocity_ned[1])), True, note, out.closest_m)
+        filtered = out.velocity_ned
+        speed = float(np.hypot(*filtered))
+        if heading_rad is not None and speed > TURN_SPEED_MPS:  # turn first: cos(heading error), floored
+            facing = float(np.dot(filtered / speed, [np.cos(heading_rad), np.sin(heading_rad)]))
+            filtered = filtered * max(facing, TURN_SPEED_MPS / speed)
+        return Filtered((float(filtered[0]), float(filtered[1])), True, note, out.closest_m)

@@ -71,10 +71,10 @@ class Supervisor:
         self.transitions: list[tuple[float, str]] = []  # (vehicle time, state) on each change
         self.restarts = 0  # vehicle clock restarts seen (reboots and jumps)
         self._notes: list[ev.Note] = []
+        self._wall = -math.inf  # the service clock of the decision being made [s]
         self.neighbours = Neighbours(cfg.vehicle_id, cfg.fleet, cfg.command.max_speed_mps)  # other boats heard
         self.separation_active = False  # the last setpoint was changed to keep min_separation_m
         self.closest_neighbour_m: float | None = None  # [m] at the last setpoint
-        self._wall = -math.inf  # the service clock of the decision being made [s]
 
     # ------------------------------------------------------------------------------ events
     def handle(self, event: ev.Event) -> ev.Decision | None:
@@ -364,7 +364,7 @@ class Supervisor:
         estimate = self.vehicle.estimate(t)
         if estimate is None:
             return v, reason
-        out = self.neighbours.keep_separation(estimate[0], v, self._wall)
+        out = self.neighbours.keep_separation(estimate[0], v, t, self._wall, self.vehicle.heading_at(t))
         self.separation_active, self.closest_neighbour_m = out.active, out.closest_m
         return out.velocity_ned, f"{reason}; {out.note}" if out.active else reason
 
