@@ -18,7 +18,7 @@ from koopguide.guidance import events as ev
 from koopguide.guidance.law import separation
 from koopguide.guidance.settings import FleetSettings
 
-MARGIN_M = 0.1  # the barrier keeps this much beyond min_separation_m: a boat does not turn or stop at once [m]
+MARGIN_M = 0.15  # the barrier keeps this much beyond min_separation_m: a boat does not turn or stop at once [m]
 TURN_SPEED_MPS = 0.02  # while turning toward the filtered direction the speed floor (keeps the direction) [m/s]
 
 

@@ -15,7 +15,7 @@ from koopguide.base import data
 from koopguide.bus.zenoh_config import default_zenoh_config
 from koopguide.harness import fleet_demo
 
-SPEEDUP = 8.0
+SPEEDUP = 3.0
 
 
 def free_tcp_port() -> int:
