@@ -18,7 +18,8 @@ from koopguide.guidance import events as ev
 from koopguide.guidance.law import separation
 from koopguide.guidance.settings import FleetSettings
 
-MARGIN_M = 0.15  # the barrier keeps this much beyond min_separation_m: a boat does not turn or stop at once [m]
+MARGIN_M = 0.15  # the barrier keeps up to this much beyond min_separation_m: a boat does not turn or stop at once [m]
+LAG_S = 4.0  # ... namely the closing speed times this (a boat's turn-and-slow lag), so boats at rest need none [s]
 TURN_SPEED_MPS = 0.02  # while turning toward the filtered direction the speed floor (keeps the direction) [m/s]
 
 
@@ -57,13 +58,31 @@ class Neighbours:
             for n in self.latest.values()
         ]
 
+    @staticmethod
+    def margins(position_ned: np.ndarray, velocity_ned: np.ndarray, others: list[separation.Neighbour]) -> np.ndarray:
+        """Per neighbour: min(MARGIN_M, LAG_S x the speed at which the gap closes now) [m]."""
+        out = []
+        for nb in others:
+            gap = np.asarray(position_ned, dtype=float) - np.asarray(nb.position_ned)
+            unit = gap / max(float(np.hypot(*gap)), 1e-9)
+            closing = -float(unit @ (velocity_ned - np.asarray(nb.velocity_ned)))
+            out.append(min(MARGIN_M, LAG_S * max(closing, 0.0)))
+        return np.array(out)
+
     def keep_separation(
-        self, position_ned: np.ndarray, v: tuple[float, float], t_s: float, wall_s: float, heading_rad: float | None
+        self,
+        position_ned: np.ndarray,
+        v: tuple[float, float],
+        t_s: float,
+        wall_s: float,
+        heading_rad: float | None,
+        velocity_ned: np.ndarray | None = None,
     ) -> Filtered:
         """Filter ``v`` [m/s]; while the filter is active and the bow points more than 90 deg off the filtered
         velocity, slow down to turn first (a boat drives on along its heading while it turns toward a new
         direction: at full speed that is toward the boat it must avoid)."""
         others = self.current(t_s, wall_s)
+        own_v = np.zeros(2) if velocity_ned is None else np.asarray(velocity_ned, dtype=float)
         if not others:
             return Filtered(v, False, "", None)
         fleet = self.fleet
@@ -72,7 +91,7 @@ class Neighbours:
             position_ned,
             np.array(v),
             others,
-            fleet.min_separation_m + MARGIN_M,
+            fleet.min_separation_m + self.margins(position_ned, own_v, others),
             fleet.barrier_gain_per_s,
             self.max_speed_mps,
         )

@@ -364,7 +364,7 @@ class Supervisor:
         estimate = self.vehicle.estimate(t)
         if estimate is None:
             return v, reason
-        out = self.neighbours.keep_separation(estimate[0], v, t, self._wall, self.vehicle.heading_at(t))
+        out = self.neighbours.keep_separation(estimate[0], v, t, self._wall, self.vehicle.heading_at(t), estimate[1])
         self.separation_active, self.closest_neighbour_m = out.active, out.closest_m
         return out.velocity_ned, f"{reason}; {out.note}" if out.active else reason
 

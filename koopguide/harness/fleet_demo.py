@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from koopguide.guidance.law.command import GuidanceState
 from koopguide.guidance.law.frames import ModelFrame
 from koopguide.guidance.law.separation import slot_goals
 from koopguide.guidance.settings import GuidanceConfig
@@ -156,7 +157,8 @@ async def fly_fleet(
     settle_s: float = FLEET_SETTLE_S,
     progress: bool = False,
 ) -> FleetResult:
-    """Run the fleet until every boat arrived plus ``settle_s`` simulated seconds, or ``timeout_s`` after start."""
+    """Run the fleet until every boat has been arrived at once for ``settle_s`` simulated seconds, or
+    ``timeout_s`` after the start."""
     from koopguide.guidance.daemon import GuidanceDaemon
     from sitl.runner import SimulationThread
 
@@ -165,7 +167,7 @@ async def fly_fleet(
     runners: list[asyncio.Task[None]] = []
     arrived: dict[str, float] = {}
     seen_active: set[str] = set()
-    t_start = None
+    t_start = all_in = None
     try:
         for cfg, zc in zip(cfgs, zenoh_configs, strict=True):
             daemons.append(await GuidanceDaemon.create(cfg, model, zc))
@@ -188,7 +190,9 @@ async def fly_fleet(
                     print_fleet_progress([d.status() for d in daemons])
                 if t_start is not None and t - t_start > timeout_s:
                     break
-                if len(arrived) == len(daemons) and t - max(arrived.values()) >= settle_s:
+                together = all(d.state is GuidanceState.ARRIVED for d in daemons)  # all at their slots now
+                all_in = (all_in if all_in is not None else t) if together else None
+                if all_in is not None and t - all_in >= settle_s:
                     break
     finally:
         for d in daemons:

@@ -10,8 +10,9 @@ from typing import Any
 import numpy as np
 
 COLOURS = ("tab:red", "tab:purple", "tab:orange", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
-GIF_FRAMES = 90  # frames of the replay
-GIF_FPS = 15
+GIF_FRAMES = 60  # frames of the replay
+GIF_FPS = 10
+GIF_DPI = 55  # the replay stays small (about a megabyte) and quick to render
 
 
 def _axes(
@@ -106,5 +107,5 @@ def animate_fleet(
         clock.set_text(f"t = {times[i] - t0:5.1f} s")
         return [*trails, *dots, *rings, clock]
 
-    FuncAnimation(fig, frame, frames=len(times), blit=False).save(output, writer=PillowWriter(fps=GIF_FPS))
+    FuncAnimation(fig, frame, frames=len(times), blit=False).save(output, writer=PillowWriter(fps=GIF_FPS), dpi=GIF_DPI)
     plt.close(fig)

@@ -94,9 +94,10 @@ def slot_goals(goal_ned: np.ndarray, starts_ned: np.ndarray, separation_m: float
 
 # ----------------------------------------------------------------------------------------- the filter
 def barrier_rows(
-    position_ned: np.ndarray, neighbours: list[Neighbour], min_separation_m: float, gain_per_s: float
+    position_ned: np.ndarray, neighbours: list[Neighbour], min_separation_m: float | np.ndarray, gain_per_s: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The CBF condition of each neighbour as ``A v >= b``: A (k, 2) [m], b (k,) [m^2/s]."""
+    """The CBF condition of each neighbour as ``A v >= b``: A (k, 2) [m], b (k,) [m^2/s]; the separation
+    one for all or (k,) one per neighbour [m]."""
     p = np.asarray(position_ned, dtype=float)
     pj = np.array([nb.position_ned for nb in neighbours], dtype=float).reshape(-1, 2)
     vj = np.array([nb.velocity_ned for nb in neighbours], dtype=float).reshape(-1, 2)
@@ -153,7 +154,7 @@ def separation_filter(
     position_ned: np.ndarray,
     command_ned: np.ndarray,
     neighbours: list[Neighbour],
-    min_separation_m: float = 0.4,
+    min_separation_m: float | np.ndarray = 0.4,
     gain_per_s: float = 1.0,
     max_speed_mps: float = 0.3,
     sidestep: float = 0.5,
