@@ -171,12 +171,12 @@ def separation_filter(
     broken = a @ capped < b - EPS
     if not broken.any() and speed <= max_speed_mps:
         return SeparationResult(cmd, False, True, closest, ())
-    wanted = capped.copy()
+    wanted = cmd.copy()  # the projection caps the speed itself (projecting the capped command is not closest)
     yielding = []
     for i, nb in enumerate(neighbours):
         if broken[i] and nb.vehicle_id < own_id:  # yield to the lower id: step to the right of the line to it
             to_nb = -a[i] / max(float(np.hypot(*a[i])), 1e-12)
-            wanted += sidestep * speed * np.array([-to_nb[1], to_nb[0]])  # +90 deg (to starboard) in NED
+            wanted += sidestep * min(speed, max_speed_mps) * np.array([-to_nb[1], to_nb[0]])  # +90 deg: starboard
             yielding.append(nb.vehicle_id)
     v, feasible = project(wanted, a, b, max_speed_mps)
     return SeparationResult(v, True, feasible, closest, tuple(yielding))
