@@ -10,6 +10,8 @@ Keys for vehicle ``<id>`` (docs/zenoh.md):
 ``koopguide/<id>/config``   queryable; the reply is ``config_snapshot()`` as JSON
 ``koopguide/<id>/control``  subscriber (when ``on_control`` is given): each payload goes to
                             ``on_control(payload)`` on the event loop (operator requests, bus.control)
+``koopguide/*/status``      subscribed only with ``listen_to_others``: the other vehicles' statuses (fleets),
+                            drained with :meth:`StatusBus.take_others`
 
 Zenoh is optional for guidance: if the session cannot be opened or an entity cannot be declared,
 :meth:`StatusBus.create` logs one warning and returns a disabled bus whose :meth:`publish` does
@@ -35,7 +37,7 @@ from typing import Any
 import zenoh
 
 from koopguide.bus.control import control_key
-from koopguide.bus.status import encode_status, validate_vehicle_id
+from koopguide.bus.status import StatusFormatError, decode_status, encode_status, validate_vehicle_id
 from koopguide.bus.zenoh_config import load_zenoh_config, zenoh_error_text
 
 __all__ = ["QUERY_POLL_S", "StatusBus", "StatusKeys", "load_zenoh_config"]
@@ -48,6 +50,8 @@ APP = "koopguide"
 QUERY_POLL_S = 0.02
 #: Queries waiting beyond this many per queryable are dropped, oldest first (the asker sees no reply).
 QUERY_BACKLOG = 16
+#: Other vehicles' statuses waiting beyond this many are dropped, oldest first.
+OTHERS_BACKLOG = 64
 
 SampleField = Callable[[dict[str, str]], Awaitable[bytes]]
 ConfigSnapshot = Callable[[], dict]
@@ -77,6 +81,7 @@ class _Declared:
     field_queryable: zenoh.Queryable
     config_queryable: zenoh.Queryable
     control: zenoh.Subscriber | None = None
+    others: zenoh.Subscriber | None = None  # koopguide/*/status, in a ring channel
 
 
 class StatusBus:
@@ -110,14 +115,18 @@ class StatusBus:
         sample_field: SampleField,
         config_snapshot: ConfigSnapshot,
         on_control: OnControl | None = None,
+        listen_to_others: bool = False,
     ) -> StatusBus:
         """Open the session off the event loop and declare everything; disabled (not raised) on failure.
+        ``listen_to_others``: also subscribe to every vehicle's status (read with :meth:`take_others`).
 
         A malformed ``vehicle_id`` is the caller's error and raises ValueError.
         """
         keys = StatusKeys.for_vehicle(vehicle_id)
         control = control_key(vehicle_id) if on_control is not None else None
-        opening = asyncio.ensure_future(asyncio.to_thread(_open_and_declare, zenoh_config, keys, control))
+        opening = asyncio.ensure_future(
+            asyncio.to_thread(_open_and_declare, zenoh_config, keys, control, listen_to_others)
+        )
         try:
             declared = await asyncio.shield(opening)
         except (zenoh.ZError, OSError) as exc:
@@ -176,6 +185,23 @@ class StatusBus:
         if self._put_failing:
             self._put_failing = False
             logger.info("zenoh put on %s works again after %d failures", self.keys.status, self.put_failures)
+
+    def take_others(self) -> list[dict[str, Any]]:
+        """The other vehicles' statuses received since the last call (oldest first; own id and malformed
+        payloads left out). Call on the event loop; never blocks."""
+        declared = self._declared
+        if declared is None or declared.others is None:
+            return []
+        out = []
+        while (sample := declared.others.try_recv()) is not None:
+            try:
+                status = decode_status(sample.payload.to_bytes())
+            except StatusFormatError as exc:
+                logger.debug("ignoring a malformed status on %s: %s", sample.key_expr, exc)
+                continue
+            if status["vehicle_id"] != self.vehicle_id:
+                out.append(status)
+        return out
 
     # --------------------------------------------------------------------------------- queries
     async def _serve_queries(self) -> None:
@@ -239,11 +265,14 @@ def _answer(query: zenoh.Query, key: str, answer: Callable[[zenoh.Query], Any]) 
 
 
 # ------------------------------------------------------------------------- blocking zenoh calls
-def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys, control: str | None = None) -> _Declared:
+def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys, control: str | None = None,
+                       listen_to_others: bool = False) -> _Declared:
     """Runs on a worker thread. On any failure, closes what it opened and re-raises."""
     session = zenoh.open(zenoh_config)
     try:
         ring = zenoh.handlers.RingChannel(QUERY_BACKLOG)
+        others = (session.declare_subscriber(f"{APP}/*/status", zenoh.handlers.RingChannel(OTHERS_BACKLOG))
+                  if listen_to_others else None)
         return _Declared(
             session=session,
             publisher=session.declare_publisher(keys.status, encoding=zenoh.Encoding.APPLICATION_JSON),
@@ -251,6 +280,7 @@ def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys, control: str
             field_queryable=session.declare_queryable(keys.field, zenoh.handlers.RingChannel(QUERY_BACKLOG)),
             config_queryable=session.declare_queryable(keys.config, zenoh.handlers.RingChannel(QUERY_BACKLOG)),
             control=session.declare_subscriber(control, ring) if control is not None else None,
+            others=others,
         )
     except BaseException:
         session.close()
@@ -260,7 +290,8 @@ def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys, control: str
 def _undeclare_and_close(declared: _Declared) -> None:
     try:
         entities = (declared.token, declared.field_queryable, declared.config_queryable, declared.publisher)
-        for entity in (*entities, *([declared.control] if declared.control is not None else [])):
+        extra = [e for e in (declared.control, declared.others) if e is not None]
+        for entity in (*entities, *extra):
             try:
                 entity.undeclare()
             except zenoh.ZError as exc:

@@ -53,6 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="speed of the current toward the north, across the field's final leg")
     p.add_argument("--zenoh-config", type=Path, help="zenoh config (JSON5) replacing the loopback default")
     p.add_argument("--timeout-s", type=float, default=120.0, help="simulated seconds allowed to arrive")
+    p.add_argument("--fleet", type=int, metavar="N", help="instead: N = 2 boats on Multi_Models_4 from both "
+                   "demonstration starts, to rendezvous slots, keeping their separation (docs/fleet.md)")
     p.set_defaults(run=cmd_demo)
 
 
@@ -94,6 +96,10 @@ async def serve(cfg: Any, model: Path, zenoh_config: Any, log_path: Path | None 
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    if args.fleet is not None:
+        from koopguide.harness.fleet_demo import run_fleet_demo
+
+        return run_fleet_demo(args)
     from koopguide.harness.mission import run_demo
 
     return run_demo(args)

@@ -47,6 +47,9 @@ log = logging.getLogger(__name__)
 
 SLACK = 0.25  # of a period: the timer commands this late when no fix triggered the due command
 SHUTDOWN_WAIT_S = 2.0  # wall seconds to see the exit mode confirmed
+NEIGHBOUR_POLL_S = 0.02  # how often the other vehicles' statuses are drained [s]
+
+
 class GuidanceDaemon:
     """Build with :meth:`create`; ``await run()`` until :meth:`stop`; then it has shut down cleanly."""
 
@@ -144,7 +147,8 @@ class GuidanceDaemon:
                 from koopguide.bus.status_bus import StatusBus
 
                 daemon.bus = await StatusBus.create(
-                    cfg.vehicle_id, zenoh_config, daemon.sample_field, daemon.config_snapshot, daemon._on_control
+                    cfg.vehicle_id, zenoh_config, daemon.sample_field, daemon.config_snapshot, daemon._on_control,
+                    listen_to_others=cfg.fleet.enabled,
                 )
         except BaseException:
             await daemon.close()
@@ -161,6 +165,7 @@ class GuidanceDaemon:
             asyncio.create_task(self._control_loop()),
             asyncio.create_task(self._heartbeat_loop()),
             asyncio.create_task(self._status_loop()),
+            asyncio.create_task(self._neighbour_loop()),
         ]
         try:
             await self._stop.wait()
@@ -326,6 +331,20 @@ class GuidanceDaemon:
                     await self.recorder.status(status, self.law.sample_grid)
             await asyncio.sleep(period)
 
+    async def _neighbour_loop(self) -> None:
+        """The other vehicles' statuses (zenoh ring channel, drained here on the loop) to the supervisor."""
+        while self.bus is not None and self.cfg.fleet.enabled:
+            for other in self.bus.take_others():
+                age = max(0.0, time.time() - other["t"])  # publication to now, wall clocks [s]
+                if other["position_ned"] is None or other["velocity_ned"] is None:
+                    continue
+                if age <= self.cfg.fleet.neighbour_timeout_s:  # in vehicle time: age x the clock's rate
+                    t_s = self.clock.now() - age * self.clock.rate
+                    self.supervisor.handle(ev.NeighbourStatus(time.monotonic(), t_s, other["vehicle_id"],
+                                                              tuple(other["position_ned"]),
+                                                              tuple(other["velocity_ned"]), age))
+            await asyncio.sleep(NEIGHBOUR_POLL_S)
+
     # ------------------------------------------------------------------------------ status
     def status(self) -> dict[str, Any]:
         """The status as the JSON object that is published (:meth:`status_document`)."""
@@ -347,6 +366,7 @@ class GuidanceDaemon:
         current = sup.vehicle.current
         extras = {
             "vehicle_time_s": round(now, 3),
+            "separation_active": sup.separation_active,
             "rejected_inputs": self.rejected_inputs,
             "current_ned": _rounded(current.current_ned) if current.updates else None,
             "control_ack": self.operator.ack,
@@ -367,25 +387,13 @@ class GuidanceDaemon:
 
     async def sample_field(self, params: dict[str, str]) -> bytes:
         """The field on a grid in NED for the ``field`` queryable (JSON bytes); ``n`` = grid points per axis."""
-        text = params.get("n", str(self.cfg.status.field_grid))
-        try:
-            n = int(text)
-        except ValueError:
-            raise ValueError(f"field query: n must be an integer, got {text!r}") from None
-        if not 2 <= n <= 200:
-            raise ValueError(f"field query: n must be 2 .. 200, got {n}")
-        if not self.supervisor.goal_placed:
-            raise ValueError("field query: the geodetic goal is not placed yet (no GLOBAL_POSITION_INT so far)")
-        return await self.field_grids.encoded(n, self.law.frame)
+        return await self.field_grids.answer(params, self.cfg.status.field_grid, self.supervisor.goal_placed,
+                                             self.law.frame)
 
     def config_snapshot(self) -> dict[str, Any]:
-        return {
-            "config": config_io.to_plain(self.cfg),
-            "model": str(self.model_path),
-            "max_field_speed_units_per_step": self.law.v_max,
-            "speed_gain": self.law.gain,
-            "goal_ned": self.law.goal_ned.tolist() if self.supervisor.goal_placed else None,
-        }
+        return {"config": config_io.to_plain(self.cfg), "model": str(self.model_path),
+                "max_field_speed_units_per_step": self.law.v_max, "speed_gain": self.law.gain,
+                "goal_ned": self.law.goal_ned.tolist() if self.supervisor.goal_placed else None}
 
 
 def _rounded(v: np.ndarray, digits: int = 4) -> list[float]:

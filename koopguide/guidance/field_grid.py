@@ -47,6 +47,20 @@ class FieldGrids:
         self._pool: ProcessPoolExecutor | None = None
         self._cache: dict[tuple[int, ModelFrame], bytes] = {}
 
+    async def answer(self, params: dict[str, str], default_n: int, goal_placed: bool, frame: ModelFrame) -> bytes:
+        """A field query's answer: ``n`` from ``params`` (default ``default_n``) checked, then the grid; a
+        ValueError (sent back to the asker) for a bad ``n`` or a geodetic goal not yet placed."""
+        text = params.get("n", str(default_n))
+        try:
+            n = int(text)
+        except ValueError:
+            raise ValueError(f"field query: n must be an integer, got {text!r}") from None
+        if not 2 <= n <= 200:
+            raise ValueError(f"field query: n must be 2 .. 200, got {n}")
+        if not goal_placed:
+            raise ValueError("field query: the geodetic goal is not placed yet (no GLOBAL_POSITION_INT so far)")
+        return await self.encoded(n, frame)
+
     async def encoded(self, n: int, frame: ModelFrame) -> bytes:
         """The grid of ``n x n`` points at placement ``frame`` as UTF-8 JSON (see docs/zenoh.md)."""
         key = (n, frame)

@@ -170,6 +170,21 @@ class StatusSettings:
 
 
 @dataclass(frozen=True)
+class FleetSettings:
+    """Separation from other boats heard on zenoh (docs/fleet.md; koopguide.guidance.law.separation)."""
+
+    enabled: bool  # filter the command to keep min_separation_m from the other vehicles' statuses
+    min_separation_m: Annotated[float, Range(0.0, 100.0, lo_open=True)]  # never closer to another boat [m]
+    slot_separation_m: Annotated[float, Range(0.0, 100.0, lo_open=True)]  # rendezvous slots this far apart [m]
+    barrier_gain_per_s: Annotated[float, Range(0.0, 100.0, lo_open=True)]  # CBF alpha: closing rate per m^2 [1/s]
+    neighbour_timeout_s: Annotated[float, Range(0.0, 60.0, lo_open=True)]  # forget a boat not heard for this long [s]
+
+    def __post_init__(self) -> None:
+        check(self.slot_separation_m >= self.min_separation_m, "fleet.slot_separation_m", self.slot_separation_m,
+              f">= min_separation_m ({self.min_separation_m})")
+
+
+@dataclass(frozen=True)
 class GuidanceConfig:
     vehicle_id: str
     arm: bool
@@ -182,6 +197,7 @@ class GuidanceConfig:
     failsafe: FailsafeSettings
     limits: LimitSettings
     status: StatusSettings
+    fleet: FleetSettings
 
     def __post_init__(self) -> None:
         check(bool(VEHICLE_ID.match(self.vehicle_id)), "vehicle_id", self.vehicle_id,

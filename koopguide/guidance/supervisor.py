@@ -25,6 +25,7 @@ from koopguide.guidance import events as ev
 from koopguide.guidance.estimation.progress import ProgressWatchdog
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceLaw, GuidanceState, along_current
 from koopguide.guidance.law.station import StationKeeper
+from koopguide.guidance.neighbours import Neighbours
 from koopguide.guidance.requests import RequestSchedule
 from koopguide.guidance.settings import ArrivalAction, GuidanceConfig
 from koopguide.guidance.vehicle_state import VehicleState
@@ -42,16 +43,11 @@ class Supervisor:
         self.cfg, self.law = cfg, law
         self.period = 1.0 / cfg.command.rate_hz  # vehicle seconds between setpoints
         self.vehicle = VehicleState(cfg)  # checked estimates: position, velocity, heading, current
-        self.station = StationKeeper(
-            cfg.arrival.station_gain,
-            cfg.arrival.integral_gain_per_s2,
-            cfg.arrival.integral_limit_mps,
-            cfg.command.max_speed_mps,
-            deadband_m=cfg.arrival.radius_m,
-        )
+        a = cfg.arrival
+        self.station = StationKeeper(a.station_gain, a.integral_gain_per_s2, a.integral_limit_mps,
+                                     cfg.command.max_speed_mps, deadband_m=a.radius_m)
         self.progress = ProgressWatchdog(cfg.failsafe.stall_s, cfg.failsafe.stall_progress_m)
-        # the vehicle's heartbeat (service clock)
-        self.heartbeat_wall: float | None = None
+        self.heartbeat_wall: float | None = None  # the vehicle's last heartbeat (service clock) [s]
         self.mode: int | None = None
         self.armed: bool | None = None
         # the state machine
@@ -71,6 +67,10 @@ class Supervisor:
         self.restarts = 0  # vehicle clock restarts seen (reboots and jumps)
         self.operator_hold: str | None = None  # who holds the boat (an operator's request); None: not held
         self._notes: list[ev.Note] = []
+        self._wall = -math.inf  # the service clock of the decision being made [s]
+        self.neighbours = Neighbours(cfg.vehicle_id, cfg.fleet, cfg.command.max_speed_mps)  # other boats heard
+        self.separation_active = False  # the last setpoint was changed to keep min_separation_m
+        self.closest_neighbour_m: float | None = None  # [m] at the last setpoint
 
     # ------------------------------------------------------------------------------ events
     def handle(self, event: ev.Event) -> ev.Decision | None:
@@ -92,6 +92,8 @@ class Supervisor:
             self.vehicle.gate.reject(event.kind, event.detail, event.wall_s)
         elif isinstance(event, ev.OperatorHold):
             self.on_operator(event)
+        elif isinstance(event, ev.NeighbourStatus):
+            self.neighbours.hear(event)
         return None
 
     def on_heartbeat(self, hb: ev.Heartbeat) -> None:
@@ -184,6 +186,7 @@ class Supervisor:
 
     def decide(self, tick: ev.Tick) -> ev.Decision:
         now, wall, cfg = tick.t_s, tick.wall_s, self.cfg
+        self._wall = wall
         in_guided = self.mode == rover.GUIDED
         if not self.link_up(wall):
             if self.link_was_up:
@@ -342,17 +345,13 @@ class Supervisor:
         self.degraded = False
 
     # ------------------------------------------------------------------------------ output
-    def _out(
-        self,
-        v: tuple[float, float],
-        state: S,
-        reason: str,
-        send: bool,
-        t: float,
-        requests: list[ev.Request] | tuple[ev.Request, ...] = (),
-    ) -> ev.Decision:
+    def _out(self, v: tuple[float, float], state: S, reason: str, send: bool, t: float,
+             requests: list[ev.Request] | tuple[ev.Request, ...] = ()) -> ev.Decision:
         if self.output_fault and state in (S.GUIDING, S.ARRIVED):
             state, reason = S.FAULT, f"setpoints are not going out ({self.reason})"
+        self.separation_active = False
+        if send and state in (S.GUIDING, S.ARRIVED) and self.cfg.fleet.enabled:
+            v, reason = self._keep_separation(v, reason, t)
         self._set_state(state, reason, t)
         velocity = (float(v[0]), float(v[1])) if send else None
         yaw = None
@@ -363,6 +362,15 @@ class Supervisor:
             elif not moving and self.cfg.failsafe.zero_with_yaw:
                 yaw = self.vehicle.heading_rad  # speed 0 at the current heading: Rover would otherwise turn north
         return ev.Decision(velocity, yaw, state, reason, self.degraded and state is S.GUIDING, tuple(requests))
+
+    def _keep_separation(self, v: tuple[float, float], reason: str, t: float) -> tuple[tuple[float, float], str]:
+        """The setpoint filtered to keep fleet.min_separation_m from the boats heard lately (law/separation.py)."""
+        estimate = self.vehicle.estimate(t)
+        if estimate is None:
+            return v, reason
+        out = self.neighbours.keep_separation(estimate[0], v, t, self._wall, self.vehicle.heading_at(t), estimate[1])
+        self.separation_active, self.closest_neighbour_m = out.active, out.closest_m
+        return out.velocity_ned, f"{reason}; {out.note}" if out.active else reason
 
     def zero_setpoint(self) -> tuple[tuple[float, float], float | None]:
         """Zero velocity, and the yaw that goes with it (the current heading, when so configured and known)."""

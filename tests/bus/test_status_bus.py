@@ -465,3 +465,35 @@ def test_cancelled_create_does_not_leak_a_session():
         await asyncio.sleep(0.5)  # the opening finishes and is closed behind the scenes
 
     asyncio.run(main())
+
+
+# ------------------------------------------------------------------------------ fleets: the others' statuses
+def test_a_bus_listening_to_others_hears_the_other_vehicle_not_itself_nor_garbage():
+    async def scenario() -> tuple[list[dict], list[dict]]:
+        port = free_port()
+        config = default_zenoh_config(port)
+        boat1 = await StatusBus.create("boat1", config, field_sampler, config_snapshot, listen_to_others=True)
+        boat2 = await StatusBus.create("boat2", config, field_sampler, config_snapshot)  # not listening
+        session = zenoh.open(default_zenoh_config(port))
+        heard1: list[dict] = []
+        try:
+            for seq in range(1, 41):
+                boat1.publish(sample_status("boat1", seq=seq))
+                boat2.publish(sample_status("boat2", seq=seq, position_ned=[1.0, float(seq)]))
+                session.put("koopguide/forged/status", b"{not json")
+                heard1 += boat1.take_others()
+                await asyncio.sleep(0.05)
+            heard1 += boat1.take_others()
+            return heard1, boat2.take_others()
+        finally:
+            session.close()
+            await boat1.close()
+            await boat2.close()
+
+    heard1, heard2 = asyncio.run(scenario())
+    assert heard1, "boat1 heard nothing from boat2"
+    assert {s["vehicle_id"] for s in heard1} == {"boat2"}  # never its own status, never the malformed one
+    seqs = [s["seq"] for s in heard1]
+    assert seqs == sorted(seqs) and seqs[-1] >= 30  # in order, and the latest ones arrive
+    assert heard1[-1]["position_ned"] == [1.0, float(seqs[-1])]
+    assert heard2 == []  # a bus that does not listen has nothing to take

@@ -357,3 +357,43 @@ def test_a_geodetic_goal_is_placed_by_events_not_written_from_outside(zshape_mod
     assert goal[0] == pytest.approx(1.5 + 1.11, abs=0.01) and goal[1] == pytest.approx(-1.5, abs=0.01)
     assert bench.sup.goal_placed and bench.tick().state is S.GUIDING
     assert any(n.level == logging.INFO and "geodetic goal" in n.text for n in bench.sup.take_notes())
+
+
+def test_a_boat_parked_on_the_path_is_passed_at_min_separation_and_the_status_says_so(zshape_model: Path) -> None:
+    """Another boat (a lower id: this one yields) sits on the path; the setpoints keep the point-mass boat at
+    least min_separation_m away, the reason says the separation filter acts, and the boat still arrives."""
+    from koopguide.guidance.events import NeighbourStatus
+
+    free = Bench(zshape_model)
+    free.fly(15.0)
+    parked = (float(free.p[0]), float(free.p[1]))  # where the boat is after 15 s without a neighbour
+    bench = Bench(zshape_model)
+    closest, reasons, active = math.inf, [], 0
+    for _ in range(round(150.0 / DT)):
+        bench.sup.handle(NeighbourStatus(bench.wall, bench.t, "aaa", parked, (0.0, 0.0), 0.0))
+        bench.sup.handle(NeighbourStatus(bench.wall, bench.t, bench.cfg.vehicle_id, (9.0, 9.0), (0.0, 0.0), 0.0))
+        (d,) = bench.fly(DT)
+        closest = min(closest, math.dist(bench.p, parked))
+        active += bench.sup.separation_active
+        reasons.append(d.reason)
+        if bench.sup.arrived_t is not None:
+            break
+    assert closest >= bench.cfg.fleet.min_separation_m, closest
+    assert active > 0 and any("separation active: nearest boat" in r and "yielding to aaa" in r for r in reasons)
+    assert bench.sup.arrived_t is not None, f"no arrival: {math.hypot(*bench.p):.2f} m from the goal"
+    assert list(bench.sup.neighbours.latest) == ["aaa"]  # its own id is never a neighbour
+
+
+def test_a_neighbour_heard_longer_ago_than_the_timeout_is_forgotten(zshape_model: Path) -> None:
+    from koopguide.guidance.events import NeighbourStatus
+
+    bench = Bench(zshape_model)
+    bench.fly(2.0)
+    ahead = tuple(bench.p + 0.3 * np.array(bench.v) / max(np.hypot(*bench.v), 1e-9))  # 0.3 m ahead
+    bench.sup.handle(NeighbourStatus(bench.wall, bench.t, "aaa", ahead, (0.0, 0.0), 0.0))
+    (d,) = bench.fly(DT)
+    assert bench.sup.separation_active and "separation active" in d.reason
+    bench.fly(bench.cfg.fleet.neighbour_timeout_s + 0.1)  # nothing more heard
+    (d,) = bench.fly(DT)
+    assert not bench.sup.separation_active and "separation" not in d.reason
+    assert bench.sup.neighbours.latest == {}
