@@ -277,7 +277,7 @@ class StreamRates:
 @dataclass(frozen=True)
 class MavlinkConfig:
     endpoints: tuple[str, ...]  # udpout:/udpin:/udp:/tcpin:/tcp:HOST:PORT, as ArduPilot SITL users write them
-    port_stride: Annotated[int, Range(0, 1000)]  # boat k (0-based) uses each endpoint's port + k * port_stride [-]
+    port_stride: Annotated[int, Range(0, 65535)]  # boat k (0-based) uses each endpoint's port + k * port_stride [-]
     heartbeat_hz: Hertz  # HEARTBEAT rate [Hz]
     streams: StreamRates
     signing_key: Path | None  # MAVLink 2 signing key file (docs/mavlink.md); null: unsigned, like a fresh autopilot
