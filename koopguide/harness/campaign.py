@@ -137,7 +137,7 @@ def run_one(spec: RunSpec) -> RunResult:
 
     logging.basicConfig(level=logging.ERROR)  # the service's state changes are in the results, not on stderr
 
-    sim_extra = {**SENSORS} if spec.vehicle == "diff_thrust" else {**SENSORS, "vehicle": spec.vehicle}  # TMP
+    sim_extra = {**SENSORS, "vehicle": spec.vehicle}
     cfg, sim_cfg, pose = mission_at(Path(spec.model), np.array(spec.start_model), spec.speedup,
                                     FLOWS[spec.flow], vehicle_id=f"c{spec.start_index}", seed=spec.seed,
                                     sim_extra=sim_extra)
