@@ -218,7 +218,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--flows", type=name_list, default=list(FLOWS), help=f"of {', '.join(FLOWS)}")
     parser.add_argument("--starts", type=int, default=4, help="random starts per vehicle and flow")
     parser.add_argument("--workers", type=int, default=2, help="parallel worker processes")
-    parser.add_argument("--speedup", type=float, default=20.0, help="simulated seconds per wall second")
+    parser.add_argument("--speedup", type=float, default=10.0,
+                        help="simulated seconds per wall second (x20 starves the service on a loaded machine)")
     parser.add_argument("--timeout-s", type=float, default=120.0, help="simulated seconds allowed to arrive")
     parser.add_argument("--hold-s", type=float, default=60.0, help="simulated seconds watched after arrival")
     parser.add_argument("--seed", type=int, default=0, help="seed of the starts and of the simulator")
