@@ -216,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", type=Path, help="model file (default: train Zshape into OUT/zshape.pt once)")
     parser.add_argument("--vehicles", type=name_list, default=list(VEHICLES), help=f"of {', '.join(VEHICLES)}")
     parser.add_argument("--flows", type=name_list, default=list(FLOWS), help=f"of {', '.join(FLOWS)}")
-    parser.add_argument("--starts", type=int, default=4, help="random starts per vehicle and flow")
+    parser.add_argument("--starts", type=int, default=6, help="random starts per vehicle and flow")
     parser.add_argument("--workers", type=int, default=2, help="parallel worker processes")
     parser.add_argument("--speedup", type=float, default=10.0,
                         help="simulated seconds per wall second (x20 starves the service on a loaded machine)")
