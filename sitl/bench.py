@@ -55,9 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--flow", default="none", help="flow kinds, comma-separated (default none)")
     args = parser.parse_args(argv)
     logging.getLogger("sitl").setLevel(logging.ERROR)  # wall contacts are not news in a benchmark
-    seconds = (
-        args.seconds if args.seconds is not None else (300.0 if args.speedup == 0 else 5.0 * args.speedup)
-    )
+    seconds = args.seconds if args.seconds is not None else (300.0 if args.speedup == 0 else 5.0 * args.speedup)
     sim_s, wall_s = asyncio.run(measure(args.count, args.flow, args.speedup, seconds))
     pace = "max speed" if args.speedup == 0 else f"--speedup {args.speedup:g}"
     print(

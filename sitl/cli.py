@@ -37,16 +37,38 @@ def speedup_value(text: str) -> float:
 
 #: Flags of ``koopguide sitl`` that set keys of config/sitl.yaml.
 SITL_FLAGS: tuple[Flag, ...] = (
-    Flag("--mavlink", "mavlink.endpoints", str, "udpout:HOST:PORT, udpin:HOST:PORT, tcpin:HOST:PORT or "
-         "tcp:HOST:PORT; repeatable (default udpout:127.0.0.1:14550)", metavar="ENDPOINT", repeat=True),
-    Flag("--signing-key", "mavlink.signing_key", str, "MAVLink 2 signing key: 32 raw bytes or 64 hex characters "
-         "(docs/mavlink.md)", metavar="FILE"),
+    Flag(
+        "--mavlink",
+        "mavlink.endpoints",
+        str,
+        "udpout:HOST:PORT, udpin:HOST:PORT, tcpin:HOST:PORT or "
+        "tcp:HOST:PORT; repeatable (default udpout:127.0.0.1:14550)",
+        metavar="ENDPOINT",
+        repeat=True,
+    ),
+    Flag(
+        "--signing-key",
+        "mavlink.signing_key",
+        str,
+        "MAVLink 2 signing key: 32 raw bytes or 64 hex characters (docs/mavlink.md)",
+        metavar="FILE",
+    ),
     Flag("--speedup", "speedup", speedup_value, "simulated s per wall s, or 'max'", metavar="X"),
-    Flag("--flow", "flow.kinds", name_list, "none, uniform, vortex, double_gyre, gusts; comma-separated to sum",
-         metavar="KIND"),
+    Flag(
+        "--flow",
+        "flow.kinds",
+        name_list,
+        "none, uniform, vortex, double_gyre, gusts; comma-separated to sum",
+        metavar="KIND",
+    ),
     Flag("--count", "count", int, "number of boats (system ids 1..N)", metavar="N"),
-    Flag("--vehicle", "vehicles", name_list, "diff_thrust (default), rudder or vectored; comma-separated for one "
-         "kind per boat", metavar="KIND"),
+    Flag(
+        "--vehicle",
+        "vehicles",
+        name_list,
+        "diff_thrust (default), rudder or vectored; comma-separated for one kind per boat",
+        metavar="KIND",
+    ),
     Flag("--seed", "seed", int, "random seed for flow and sensor noise", metavar="N"),
     Flag("--duration", "duration_s", float, "stop after S simulated seconds", metavar="S"),
     Flag("--record", "recorder.path", str, "write ground truth as JSON lines to FILE", metavar="FILE"),

@@ -95,9 +95,7 @@ class Flow:
         self._gyre = FlowKind.DOUBLE_GYRE in kinds
         self._noise: list[OrnsteinUhlenbeck2D] = []
         if FlowKind.UNIFORM in kinds and cfg.uniform.drift_std_mps > 0:
-            self._noise.append(
-                OrnsteinUhlenbeck2D(cfg.uniform.drift_std_mps, cfg.uniform.drift_time_constant_s)
-            )
+            self._noise.append(OrnsteinUhlenbeck2D(cfg.uniform.drift_std_mps, cfg.uniform.drift_time_constant_s))
         if FlowKind.GUSTS in kinds and cfg.gusts.std_mps > 0:
             self._noise.append(OrnsteinUhlenbeck2D(cfg.gusts.std_mps, cfg.gusts.time_constant_s))
         self._offset = (0.0, 0.0)

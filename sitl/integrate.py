@@ -20,6 +20,4 @@ def rk4_step(f: Derivative, t: float, x: Sequence[float], h: float) -> Vector:
     k3 = f(t + half, tuple(xi + half * ki for xi, ki in zip(x, k2, strict=True)))
     k4 = f(t + h, tuple(xi + h * ki for xi, ki in zip(x, k3, strict=True)))
     sixth = h / 6.0
-    return tuple(
-        xi + sixth * (a + 2.0 * b + 2.0 * c + d) for xi, a, b, c, d in zip(x, k1, k2, k3, k4, strict=True)
-    )
+    return tuple(xi + sixth * (a + 2.0 * b + 2.0 * c + d) for xi, a, b, c, d in zip(x, k1, k2, k3, k4, strict=True))

@@ -58,9 +58,7 @@ class SimulatorProcess:
             if not line and self._proc.poll() is not None:
                 err = self._proc.stderr.read() if self._proc.stderr else ""
                 self._dir.cleanup()
-                raise RuntimeError(
-                    f"simulator exited with {self._proc.returncode} before ready: {err.strip()}"
-                )
+                raise RuntimeError(f"simulator exited with {self._proc.returncode} before ready: {err.strip()}")
             if line.startswith("sitl: boat "):
                 _, _, sysid, _, address = line.split(" ", 4)
                 self.addresses.setdefault(int(sysid), []).append(address)

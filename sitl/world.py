@@ -39,8 +39,7 @@ class Tank:
     def contains(self, n: float, e: float, inset_m: float = 0.0) -> bool:
         """True if (n, e) [m] is inside the walls by at least inset_m [m] (always, without walls)."""
         return not self.enabled or (
-            self.n_min + inset_m <= n <= self.n_max - inset_m
-            and self.e_min + inset_m <= e <= self.e_max - inset_m
+            self.n_min + inset_m <= n <= self.n_max - inset_m and self.e_min + inset_m <= e <= self.e_max - inset_m
         )
 
     def confine(

@@ -50,7 +50,7 @@ def load_source(source: str | Path) -> Demonstrations:
         from koopguide.base.synthetic import load_synthetic
 
         return load_synthetic(text[len("synthetic:") :])
-    return load_lasa(text[len("lasa:"):]) if text.startswith("lasa:") else load_demos(text)
+    return load_lasa(text[len("lasa:") :]) if text.startswith("lasa:") else load_demos(text)
 
 
 # ---------------------------------------------------------------------------------- user files

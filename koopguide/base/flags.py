@@ -36,8 +36,14 @@ def add_flags(parser: argparse.ArgumentParser, flags: Sequence[Flag]) -> None:
         if f.parse is None:
             parser.add_argument(f.flag, dest=f.dest, action="store_true", default=None, help=f.help)
         else:
-            parser.add_argument(f.flag, dest=f.dest, type=f.parse, metavar=f.metavar, help=f.help,
-                                action="append" if f.repeat else "store")
+            parser.add_argument(
+                f.flag,
+                dest=f.dest,
+                type=f.parse,
+                metavar=f.metavar,
+                help=f.help,
+                action="append" if f.repeat else "store",
+            )
 
 
 def overrides_from(args: argparse.Namespace, flags: Sequence[Flag]) -> dict[str, Any]:

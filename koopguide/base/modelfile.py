@@ -148,8 +148,10 @@ def _validate_limit(path: Path, table: Any, spec: Any, d: int) -> None:
     if not isinstance(table, np.ndarray) or not isinstance(spec, dict):
         raise ModelFileError(f"{path}: a Lyapunov limit needs both weights.limit_table and meta.limit")
     if table.ndim != d or min(table.shape) < 2 or max(table.shape) > 4096 or table.dtype.kind != "f":
-        raise ModelFileError(f"{path}: limit_table has shape {table.shape} and dtype {table.dtype}, expected a "
-                             f"{d}-D float grid of 2..4096 nodes per axis")
+        raise ModelFileError(
+            f"{path}: limit_table has shape {table.shape} and dtype {table.dtype}, expected a "
+            f"{d}-D float grid of 2..4096 nodes per axis"
+        )
     if not np.all(np.isfinite(table)) or np.min(table) < 0:
         raise ModelFileError(f"{path}: limit_table holds non-finite or negative ratios")
     lo = _finite_vector(path, "limit.lo", spec.get("lo"), d)

@@ -130,14 +130,27 @@ def vehicle_id_of(key: str) -> str:
 #: Columns: position N/E, distance to goal, |commanded velocity|, age of the position the daemon used,
 #: age of the last status received here, guidance loop latency percentiles, malformed payloads.
 COLUMNS = (
-    "VEHICLE", "LIVE", "STATE", "MODE", "ARMED", "N[m]", "E[m]", "TO GOAL[m]", "CMD[m/s]",
-    "POS AGE[s]", "MSG AGE[s]", "LOOP p50/p99[ms]", "BAD", "SUSPECT",
+    "VEHICLE",
+    "LIVE",
+    "STATE",
+    "MODE",
+    "ARMED",
+    "N[m]",
+    "E[m]",
+    "TO GOAL[m]",
+    "CMD[m/s]",
+    "POS AGE[s]",
+    "MSG AGE[s]",
+    "LOOP p50/p99[ms]",
+    "BAD",
+    "SUSPECT",
 )
 _RIGHT_ALIGNED = frozenset({"N[m]", "E[m]", "TO GOAL[m]", "CMD[m/s]", "POS AGE[s]", "MSG AGE[s]", "BAD", "SUSPECT"})
 
 
-def render_table(vehicles: dict[str, VehicleView], now: float, *, malformed: int = 0,
-                 last_error: str | None = None) -> str:
+def render_table(
+    vehicles: dict[str, VehicleView], now: float, *, malformed: int = 0, last_error: str | None = None
+) -> str:
     """The vehicles as a text table, one row each sorted by id, with a summary line above.
 
     ``now`` is the current unix time [s], for the age of each vehicle's last status.
@@ -152,8 +165,9 @@ def render_table(vehicles: dict[str, VehicleView], now: float, *, malformed: int
         lines.append(f"  last malformed: {_clip(last_error, 110)}")
     for view in sorted(vehicles.values(), key=lambda v: v.vehicle_id):
         if view.last_suspect:
-            lines.append(f"  SUSPECT {view.vehicle_id}: {view.suspect} status(es) ignored, last: "
-                         f"{_clip(view.last_suspect, 90)}")
+            lines.append(
+                f"  SUSPECT {view.vehicle_id}: {view.suspect} status(es) ignored, last: {_clip(view.last_suspect, 90)}"
+            )
     if not vehicles:
         lines.append("(no vehicles yet: waiting for koopguide/*/status and koopguide/*/alive)")
         return "\n".join(lines)
@@ -169,8 +183,22 @@ def _row(view: VehicleView, now: float) -> tuple[str, ...]:
     status_age = "-" if view.received_at is None else _num(max(0.0, now - view.received_at), 1)
     s = view.status
     if s is None:
-        return (view.vehicle_id, live, "-", "-", "-", "-", "-", "-", "-", "-", status_age, "-", str(view.malformed),
-                str(view.suspect))
+        return (
+            view.vehicle_id,
+            live,
+            "-",
+            "-",
+            "-",
+            "-",
+            "-",
+            "-",
+            "-",
+            "-",
+            status_age,
+            "-",
+            str(view.malformed),
+            str(view.suspect),
+        )
     position = s["position_ned"] or (None, None)
     cmd = s["cmd_velocity_ned"]
     latency = s["loop_latency_ms"]

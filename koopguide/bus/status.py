@@ -187,36 +187,78 @@ class Status:
 
     t: float = field(metadata=_spec("float", "s", "Unix wall time of publication", _float))
     seq: int = field(metadata=_spec("int", "", "publication counter of this service, from 1, +1 per status", _seq))
-    vehicle_id: str = field(metadata=_spec("str", "", "the vehicle id, also the key segment: 1-64 of "
-                                           "`A-Z a-z 0-9 _ -`", _vehicle_id))
-    state: str = field(metadata=_spec("str", "", "`idle`, `waiting`, `guiding`, `arrived`, `hold` or `fault` "
-                                      "([guidance.md](guidance.md), \"States\")", _state))
-    reason: str | None = field(metadata=_spec("str or null", "", "why the service is in this state, one line "
-                                              "(the same text as in its log)", _optional(_string)))
-    degraded: bool = field(metadata=_spec("bool", "", "guiding with a fallback strategy (e.g. direct pursuit "
-                                          "after the progress watchdog fired); `reason` says why", _bool))
-    mode: str | None = field(metadata=_spec("str or null", "", "the autopilot's mode name, e.g. `\"GUIDED\"` "
-                                            "(`\"MODE_9\"` for a number not in the Rover table); null before a "
-                                            "heartbeat", _optional(_string)))
-    armed: bool | None = field(metadata=_spec("bool or null", "", "the autopilot's armed flag; null before a "
-                                              "heartbeat", _optional(_bool)))
-    position_ned: list[float] | None = field(metadata=_spec("[N, E] or null", "m", "the estimated position; "
-                                                            "null before the first fix", _optional(_pair)))
-    velocity_ned: list[float] | None = field(metadata=_spec("[vN, vE] or null", "m/s", "the estimated velocity",
-                                                            _optional(_pair)))
-    goal_ned: list[float] | None = field(metadata=_spec("[N, E] or null", "m", "where the model's goal lands; "
-                                                        "null until a geodetic goal is placed", _optional(_pair)))
-    distance_to_goal_m: float | None = field(metadata=_spec("float >= 0 or null", "m", "distance from "
-                                                            "`position_ned` to the goal", _optional(_non_negative)))
-    cmd_velocity_ned: list[float] = field(metadata=_spec("[vN, vE]", "m/s", "the velocity setpoint last sent "
-                                                         "(zeros when holding)", _pair))
-    speed_limit_mps: float = field(metadata=_spec("float >= 0", "m/s", "`command.max_speed_mps`, the largest "
-                                                  "speed ever commanded", _non_negative))
-    position_age_s: float | None = field(metadata=_spec("float or null", "s", "vehicle time since the newest "
-                                                        "accepted position fix", _optional(_float)))
-    loop_latency_ms: dict[str, float | None] = field(metadata=_spec("`{\"p50\", \"p99\"}`", "ms", "percentiles "
-                                                                    "of the fix-to-setpoint latency; null before "
-                                                                    "any", _latency))
+    vehicle_id: str = field(
+        metadata=_spec("str", "", "the vehicle id, also the key segment: 1-64 of `A-Z a-z 0-9 _ -`", _vehicle_id)
+    )
+    state: str = field(
+        metadata=_spec(
+            "str",
+            "",
+            '`idle`, `waiting`, `guiding`, `arrived`, `hold` or `fault` ([guidance.md](guidance.md), "States")',
+            _state,
+        )
+    )
+    reason: str | None = field(
+        metadata=_spec(
+            "str or null",
+            "",
+            "why the service is in this state, one line (the same text as in its log)",
+            _optional(_string),
+        )
+    )
+    degraded: bool = field(
+        metadata=_spec(
+            "bool",
+            "",
+            "guiding with a fallback strategy (e.g. direct pursuit "
+            "after the progress watchdog fired); `reason` says why",
+            _bool,
+        )
+    )
+    mode: str | None = field(
+        metadata=_spec(
+            "str or null",
+            "",
+            'the autopilot\'s mode name, e.g. `"GUIDED"` '
+            '(`"MODE_9"` for a number not in the Rover table); null before a '
+            "heartbeat",
+            _optional(_string),
+        )
+    )
+    armed: bool | None = field(
+        metadata=_spec("bool or null", "", "the autopilot's armed flag; null before a heartbeat", _optional(_bool))
+    )
+    position_ned: list[float] | None = field(
+        metadata=_spec("[N, E] or null", "m", "the estimated position; null before the first fix", _optional(_pair))
+    )
+    velocity_ned: list[float] | None = field(
+        metadata=_spec("[vN, vE] or null", "m/s", "the estimated velocity", _optional(_pair))
+    )
+    goal_ned: list[float] | None = field(
+        metadata=_spec(
+            "[N, E] or null",
+            "m",
+            "where the model's goal lands; null until a geodetic goal is placed",
+            _optional(_pair),
+        )
+    )
+    distance_to_goal_m: float | None = field(
+        metadata=_spec("float >= 0 or null", "m", "distance from `position_ned` to the goal", _optional(_non_negative))
+    )
+    cmd_velocity_ned: list[float] = field(
+        metadata=_spec("[vN, vE]", "m/s", "the velocity setpoint last sent (zeros when holding)", _pair)
+    )
+    speed_limit_mps: float = field(
+        metadata=_spec("float >= 0", "m/s", "`command.max_speed_mps`, the largest speed ever commanded", _non_negative)
+    )
+    position_age_s: float | None = field(
+        metadata=_spec("float or null", "s", "vehicle time since the newest accepted position fix", _optional(_float))
+    )
+    loop_latency_ms: dict[str, float | None] = field(
+        metadata=_spec(
+            '`{"p50", "p99"}`', "ms", "percentiles of the fix-to-setpoint latency; null before any", _latency
+        )
+    )
     model: str = field(metadata=_spec("str", "", "the model file, as given to `--model`", _string))
     extras: dict[str, Any] = field(default_factory=dict, metadata={"extra": True})
 

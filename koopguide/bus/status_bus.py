@@ -179,8 +179,11 @@ class StatusBus:
             self.put_failures += 1
             if not self._put_failing:
                 self._put_failing = True
-                logger.warning("zenoh put on %s failed (logged once until it works again): %s",
-                               self.keys.status, zenoh_error_text(exc))
+                logger.warning(
+                    "zenoh put on %s failed (logged once until it works again): %s",
+                    self.keys.status,
+                    zenoh_error_text(exc),
+                )
             return
         if self._put_failing:
             self._put_failing = False
@@ -265,14 +268,18 @@ def _answer(query: zenoh.Query, key: str, answer: Callable[[zenoh.Query], Any]) 
 
 
 # ------------------------------------------------------------------------- blocking zenoh calls
-def _open_and_declare(zenoh_config: zenoh.Config, keys: StatusKeys, control: str | None = None,
-                       listen_to_others: bool = False) -> _Declared:
+def _open_and_declare(
+    zenoh_config: zenoh.Config, keys: StatusKeys, control: str | None = None, listen_to_others: bool = False
+) -> _Declared:
     """Runs on a worker thread. On any failure, closes what it opened and re-raises."""
     session = zenoh.open(zenoh_config)
     try:
         ring = zenoh.handlers.RingChannel(QUERY_BACKLOG)
-        others = (session.declare_subscriber(f"{APP}/*/status", zenoh.handlers.RingChannel(OTHERS_BACKLOG))
-                  if listen_to_others else None)
+        others = (
+            session.declare_subscriber(f"{APP}/*/status", zenoh.handlers.RingChannel(OTHERS_BACKLOG))
+            if listen_to_others
+            else None
+        )
         return _Declared(
             session=session,
             publisher=session.declare_publisher(keys.status, encoding=zenoh.Encoding.APPLICATION_JSON),

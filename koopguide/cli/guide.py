@@ -18,10 +18,20 @@ from koopguide.base.flags import Flag, add_flags, number_pair, overrides_from
 
 #: Flags of ``koopguide run`` that set keys of config/guidance.yaml.
 GUIDANCE_FLAGS: tuple[Flag, ...] = (
-    Flag("--mavlink", "mavlink.endpoint", str, "udp:HOST:PORT (listen), udpout:, tcp:, tcpin: or DEVICE,BAUD",
-         metavar="ENDPOINT"),
-    Flag("--signing-key", "mavlink.signing_key", str, "MAVLink 2 signing key: 32 raw bytes or 64 hex characters "
-         "(docs/mavlink.md)", metavar="FILE"),
+    Flag(
+        "--mavlink",
+        "mavlink.endpoint",
+        str,
+        "udp:HOST:PORT (listen), udpout:, tcp:, tcpin: or DEVICE,BAUD",
+        metavar="ENDPOINT",
+    ),
+    Flag(
+        "--signing-key",
+        "mavlink.signing_key",
+        str,
+        "MAVLink 2 signing key: 32 raw bytes or 64 hex characters (docs/mavlink.md)",
+        metavar="FILE",
+    ),
     Flag("--vehicle-id", "vehicle_id", str, "name on zenoh: koopguide/<id>/status"),
     Flag("--goal-ned", "frame.goal_ned", number_pair, "where the model's goal lands in local NED [m]", metavar="N,E"),
     Flag("--goal-latlon", "frame.goal_latlon", number_pair, "a geodetic goal instead [deg]", metavar="LAT,LON"),
@@ -29,8 +39,13 @@ GUIDANCE_FLAGS: tuple[Flag, ...] = (
     Flag("--heading-deg", "frame.heading_deg", float, "compass heading of the model's +x axis"),
     Flag("--max-speed", "command.max_speed_mps", float, "the field's top speed maps to this [m/s]"),
     Flag("--arm", "arm", None, "arm the vehicle after switching to GUIDED"),
-    Flag("--control-token-file", "status.control_token_file", str, "token shared with koopguide dashboard: "
-         "obey its operator hold (docs/dashboard.md)", metavar="FILE"),
+    Flag(
+        "--control-token-file",
+        "status.control_token_file",
+        str,
+        "token shared with koopguide dashboard: obey its operator hold (docs/dashboard.md)",
+        metavar="FILE",
+    ),
 )
 
 
@@ -40,8 +55,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=Path, help="YAML overriding config/guidance.yaml")
     add_flags(p, GUIDANCE_FLAGS)
     p.add_argument("--zenoh-config", type=Path, help="zenoh config (JSON5) replacing the loopback default")
-    p.add_argument("--log", type=Path, metavar="FILE.mcap", help="record fixes, estimates, setpoints, states and "
-                   "statuses as MCAP (render: koopguide replay FILE.mcap -o mission.gif)")
+    p.add_argument(
+        "--log",
+        type=Path,
+        metavar="FILE.mcap",
+        help="record fixes, estimates, setpoints, states and "
+        "statuses as MCAP (render: koopguide replay FILE.mcap -o mission.gif)",
+    )
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     p.set_defaults(run=cmd_run)
 
@@ -49,18 +69,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("out"), help="folder for the model cache and the plot")
     p.add_argument("--speedup", type=float, default=10.0, help="simulated seconds per wall second")
     p.add_argument("--start", type=int, default=0, help="which Zshape demonstration to start from (0-6)")
-    p.add_argument("--current-mps", type=float, default=0.03,
-                   help="speed of the current toward the north, across the field's final leg")
+    p.add_argument(
+        "--current-mps",
+        type=float,
+        default=0.03,
+        help="speed of the current toward the north, across the field's final leg",
+    )
     p.add_argument("--zenoh-config", type=Path, help="zenoh config (JSON5) replacing the loopback default")
     p.add_argument("--timeout-s", type=float, default=120.0, help="simulated seconds allowed to arrive")
-    p.add_argument("--fleet", type=int, metavar="N", help="instead: N = 2 boats on Multi_Models_4 from both "
-                   "demonstration starts, to rendezvous slots, keeping their separation (docs/fleet.md)")
+    p.add_argument(
+        "--fleet",
+        type=int,
+        metavar="N",
+        help="instead: N = 2 boats on Multi_Models_4 from both "
+        "demonstration starts, to rendezvous slots, keeping their separation (docs/fleet.md)",
+    )
     p.set_defaults(run=cmd_demo)
 
 
 def setup_logging(verbose: bool) -> None:
-    logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.DEBUG if verbose else logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
 
 
 def cmd_run(args: argparse.Namespace) -> int:

@@ -20,8 +20,14 @@ def _registrars() -> list[Registrar]:
     # Imported lazily so `koopguide eval` never pays for torch, and `koopguide sitl` never for the learner.
     from koopguide.cli import dashboard, fleet, guide, learn, monitor, replay
 
-    registrars: list[Registrar] = [learn.register, guide.register, monitor.register, dashboard.register,
-                                   replay.register, fleet.register]
+    registrars: list[Registrar] = [
+        learn.register,
+        guide.register,
+        monitor.register,
+        dashboard.register,
+        replay.register,
+        fleet.register,
+    ]
     try:
         from sitl import cli as sitl_cli
     except ImportError as exc:  # the simulator package is part of this distribution

@@ -33,19 +33,34 @@ ONCE_SETTLE_S = 0.5
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("monitor", help="live table of every guidance daemon's status (zenoh)")
-    p.add_argument("--zenoh-config", type=Path, metavar="FILE",
-                   help="zenoh configuration (JSON5) replacing the default config/zenoh.json5")
+    p.add_argument(
+        "--zenoh-config",
+        type=Path,
+        metavar="FILE",
+        help="zenoh configuration (JSON5) replacing the default config/zenoh.json5",
+    )
     when = p.add_mutually_exclusive_group()
     when.add_argument("--duration", type=float, metavar="S", help="exit (code 0) after S seconds")
-    when.add_argument("--once", action="store_true",
-                      help=f"print one table once every alive vehicle has reported; exit 1 if no status "
-                           f"arrives within {ONCE_TIMEOUT_S:g} s")
+    when.add_argument(
+        "--once",
+        action="store_true",
+        help=f"print one table once every alive vehicle has reported; exit 1 if no status "
+        f"arrives within {ONCE_TIMEOUT_S:g} s",
+    )
     p.set_defaults(run=cmd_monitor)
 
-    p = sub.add_parser("zenoh-router", help="a zenoh router for a group of koopguide processes (e.g. with access "
-                       "control: config/zenoh-router-acl.json5), until interrupted")
-    p.add_argument("--zenoh-config", type=Path, metavar="FILE", required=True,
-                   help="the router's zenoh configuration (JSON5), e.g. a copy of config/zenoh-router-acl.json5")
+    p = sub.add_parser(
+        "zenoh-router",
+        help="a zenoh router for a group of koopguide processes (e.g. with access "
+        "control: config/zenoh-router-acl.json5), until interrupted",
+    )
+    p.add_argument(
+        "--zenoh-config",
+        type=Path,
+        metavar="FILE",
+        required=True,
+        help="the router's zenoh configuration (JSON5), e.g. a copy of config/zenoh-router-acl.json5",
+    )
     p.add_argument("--duration", type=float, metavar="S", help="exit (code 0) after S seconds")
     p.set_defaults(run=cmd_router)
 
@@ -63,15 +78,18 @@ def cmd_router(args: argparse.Namespace) -> int:
         raise ValueError(f"--duration must be a positive number of seconds, got {args.duration:g}")
     cfg = load_zenoh_config(args.zenoh_config)
     if json.loads(cfg.get_json("mode")) != "router":
-        raise ConfigError(f"{args.zenoh_config}: mode must be \"router\" for a router")
+        raise ConfigError(f'{args.zenoh_config}: mode must be "router" for a router')
     try:
         session = zenoh.open(cfg)
     except zenoh.ZError as exc:
         raise ConfigError(f"cannot start the zenoh router: {zenoh_error_text(exc)}") from None
     signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt))
     try:
-        print(f"koopguide zenoh-router: {session.zid()} listening on {json.loads(cfg.get_json('listen/endpoints'))}",
-              file=sys.stderr, flush=True)
+        print(
+            f"koopguide zenoh-router: {session.zid()} listening on {json.loads(cfg.get_json('listen/endpoints'))}",
+            file=sys.stderr,
+            flush=True,
+        )
         end = math.inf if args.duration is None else time.monotonic() + args.duration
         while time.monotonic() < end:
             time.sleep(min(0.2, max(0.0, end - time.monotonic())))

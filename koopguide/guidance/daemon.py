@@ -33,9 +33,11 @@ from koopguide.guidance.field_grid import FieldGrids
 from koopguide.guidance.latency import LatencyWindow
 from koopguide.guidance.law.command import GuidanceLaw, GuidanceState
 from koopguide.guidance.link import open_link
+from koopguide.guidance.neighbours import neighbour_event
 from koopguide.guidance.operator import OperatorControl, load_token
 from koopguide.guidance.recorder import MissionRecorder
 from koopguide.guidance.settings import ExitMode, GuidanceConfig
+from koopguide.guidance.status_report import service_status
 from koopguide.guidance.supervisor import Supervisor
 from koopguide.guidance.vehicle_events import VehicleEvents
 from koopguide.mavlink import rover
@@ -126,8 +128,9 @@ class GuidanceDaemon:
         certified, why = certificate_ok(field)
         if not certified:
             if not cfg.allow_uncertified:
-                raise ModelFileError(f"{model_path}: {why}; refusing to guide with it (allow_uncertified: true to "
-                                     f"override)")
+                raise ModelFileError(
+                    f"{model_path}: {why}; refusing to guide with it (allow_uncertified: true to override)"
+                )
             log.warning("UNCERTIFIED MODEL %s: %s; guiding anyway (allow_uncertified)", model_path, why)
         law = GuidanceLaw.from_config(field, cfg)
         token_file = cfg.status.control_token_file
@@ -147,7 +150,11 @@ class GuidanceDaemon:
                 from koopguide.bus.status_bus import StatusBus
 
                 daemon.bus = await StatusBus.create(
-                    cfg.vehicle_id, zenoh_config, daemon.sample_field, daemon.config_snapshot, daemon._on_control,
+                    cfg.vehicle_id,
+                    zenoh_config,
+                    daemon.sample_field,
+                    daemon.config_snapshot,
+                    daemon._on_control,
                     listen_to_others=cfg.fleet.enabled,
                 )
         except BaseException:
@@ -335,14 +342,16 @@ class GuidanceDaemon:
         """The other vehicles' statuses (zenoh ring channel, drained here on the loop) to the supervisor."""
         while self.bus is not None and self.cfg.fleet.enabled:
             for other in self.bus.take_others():
-                age = max(0.0, time.time() - other["t"])  # publication to now, wall clocks [s]
-                if other["position_ned"] is None or other["velocity_ned"] is None:
-                    continue
-                if age <= self.cfg.fleet.neighbour_timeout_s:  # in vehicle time: age x the clock's rate
-                    t_s = self.clock.now() - age * self.clock.rate
-                    self.supervisor.handle(ev.NeighbourStatus(time.monotonic(), t_s, other["vehicle_id"],
-                                                              tuple(other["position_ned"]),
-                                                              tuple(other["velocity_ned"]), age))
+                event = neighbour_event(
+                    other,
+                    time.time(),
+                    time.monotonic(),
+                    self.clock.now(),
+                    self.clock.rate,
+                    self.cfg.fleet.neighbour_timeout_s,
+                )
+                if event is not None:
+                    self.supervisor.handle(event)
             await asyncio.sleep(NEIGHBOUR_POLL_S)
 
     # ------------------------------------------------------------------------------ status
@@ -352,49 +361,39 @@ class GuidanceDaemon:
 
     def status_document(self) -> Status:
         """The status (:class:`koopguide.bus.status.Status`, docs/zenoh.md): NED metres, m/s, seconds."""
-        now, sup = self.clock.now(), self.supervisor
-        position = velocity = distance = None
-        estimate = sup.vehicle.estimate(now)
-        if estimate is not None:
-            p, v = estimate
-            position, velocity = _rounded(p), _rounded(v)
-            distance = round(self.law.distance_to_goal(p), 4)
-            sup.reacquire_if_drifted(distance, now)  # never "arrived" farther than reacquire_radius_m
-            self._log_notes()
-        age = self.position_age()
+        sup = self.supervisor
+        status = service_status(
+            self.cfg,
+            sup,
+            self.law,
+            self.clock.now(),
+            self._seq,
+            self.last_cmd,
+            self.latency.percentiles(),
+            str(self.model_path),
+            self.position_age(),
+        )
+        self._log_notes()  # the reacquire check may have noted why the boat is guided again
         link = self.link.stats if self.link is not None else None
-        current = sup.vehicle.current
-        extras = {
-            "vehicle_time_s": round(now, 3),
-            "separation_active": sup.separation_active,
+        status.extras.update({
             "rejected_inputs": self.rejected_inputs,
-            "current_ned": _rounded(current.current_ned) if current.updates else None,
             "control_ack": self.operator.ack,
             "control_refused": self.operator.refused,
-            "link": {"up": sup.link_up(time.monotonic()), "received": link.received, "foreign": link.foreign,
-                     "corrupt": link.corrupt, "sent": link.sent, "reconnects": link.reconnects,
-                     "unsigned": link.unsigned, "bad_signature": link.bad_signature,
-                     "wrong_source": link.wrong_source, "source_changes": link.source_changes} if link else None,
-        }
-        return Status(
-            t=time.time(), seq=self._seq, vehicle_id=self.cfg.vehicle_id, state=sup.state.value, reason=sup.reason,
-            degraded=self.degraded, mode=rover.mode_name(sup.mode), armed=sup.armed, position_ned=position,
-            velocity_ned=velocity, goal_ned=_rounded(self.law.goal_ned) if sup.goal_placed else None,
-            distance_to_goal_m=distance, cmd_velocity_ned=_rounded(self.last_cmd),
-            speed_limit_mps=self.cfg.command.max_speed_mps, position_age_s=None if age is None else round(age, 4),
-            loop_latency_ms=self.latency.percentiles(), model=str(self.model_path), extras=extras,
-        )
+            "link": {"up": sup.link_up(time.monotonic()), **link.status_counters()} if link else None,
+        })  # fmt: skip
+        return status
 
     async def sample_field(self, params: dict[str, str]) -> bytes:
         """The field on a grid in NED for the ``field`` queryable (JSON bytes); ``n`` = grid points per axis."""
-        return await self.field_grids.answer(params, self.cfg.status.field_grid, self.supervisor.goal_placed,
-                                             self.law.frame)
+        return await self.field_grids.answer(
+            params, self.cfg.status.field_grid, self.supervisor.goal_placed, self.law.frame
+        )
 
     def config_snapshot(self) -> dict[str, Any]:
-        return {"config": config_io.to_plain(self.cfg), "model": str(self.model_path),
-                "max_field_speed_units_per_step": self.law.v_max, "speed_gain": self.law.gain,
-                "goal_ned": self.law.goal_ned.tolist() if self.supervisor.goal_placed else None}
-
-
-def _rounded(v: np.ndarray, digits: int = 4) -> list[float]:
-    return [round(float(x), digits) for x in v]
+        return {
+            "config": config_io.to_plain(self.cfg),
+            "model": str(self.model_path),
+            "max_field_speed_units_per_step": self.law.v_max,
+            "speed_gain": self.law.gain,
+            "goal_ned": self.law.goal_ned.tolist() if self.supervisor.goal_placed else None,
+        }

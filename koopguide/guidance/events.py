@@ -94,7 +94,14 @@ class NeighbourStatus:
 
 
 Event = (
-    Heartbeat | PositionFix | Attitude | GlobalFix | ClockRestart | InputRejected | OperatorHold | Tick
+    Heartbeat
+    | PositionFix
+    | Attitude
+    | GlobalFix
+    | ClockRestart
+    | InputRejected
+    | OperatorHold
+    | Tick
     | NeighbourStatus
 )
 

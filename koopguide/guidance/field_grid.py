@@ -66,8 +66,12 @@ class FieldGrids:
         key = (n, frame)
         if key not in self._cache:
             if self._pool is None:
-                self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=_start_worker, initargs=(self._model_path, self._cfg))
+                self._pool = ProcessPoolExecutor(
+                    1,
+                    mp_context=multiprocessing.get_context("spawn"),
+                    initializer=_start_worker,
+                    initargs=(self._model_path, self._cfg),
+                )
             payload = await asyncio.get_running_loop().run_in_executor(self._pool, _encode, n, frame)
             if len(self._cache) >= CACHE_SIZE:
                 self._cache.pop(next(iter(self._cache)))

@@ -105,3 +105,22 @@ class Neighbours:
             facing = float(np.dot(filtered / speed, [np.cos(heading_rad), np.sin(heading_rad)]))
             filtered = filtered * max(facing, TURN_SPEED_MPS / speed)
         return Filtered((float(filtered[0]), float(filtered[1])), True, note, out.closest_m)
+
+
+def neighbour_event(
+    other: dict, unix_now: float, wall_now: float, vehicle_now: float, clock_rate: float, timeout_s: float
+) -> ev.NeighbourStatus | None:
+    """Another vehicle's decoded status as an event for the supervisor, or None when it has no position or
+    is older than ``timeout_s`` (publication to now, unix clocks [s]). Its time on this vehicle's clock is
+    ``vehicle_now`` minus its age scaled by the clock's rate (simulators run faster than the wall)."""
+    age = max(0.0, unix_now - other["t"])
+    if other["position_ned"] is None or other["velocity_ned"] is None or age > timeout_s:
+        return None
+    return ev.NeighbourStatus(
+        wall_now,
+        vehicle_now - age * clock_rate,
+        other["vehicle_id"],
+        tuple(other["position_ned"]),
+        tuple(other["velocity_ned"]),
+        age,
+    )

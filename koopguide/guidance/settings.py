@@ -61,8 +61,12 @@ class MavlinkSettings:
     signing_key: Path | None  # MAVLink 2 signing key file (docs/mavlink.md); null: unsigned, trust the link
 
     def __post_init__(self) -> None:
-        check(self.reconnect_max_s >= self.reconnect_min_s, "mavlink.reconnect_max_s", self.reconnect_max_s,
-              f">= reconnect_min_s ({self.reconnect_min_s})")
+        check(
+            self.reconnect_max_s >= self.reconnect_min_s,
+            "mavlink.reconnect_max_s",
+            self.reconnect_max_s,
+            f">= reconnect_min_s ({self.reconnect_min_s})",
+        )
 
 
 @dataclass(frozen=True)
@@ -87,8 +91,12 @@ class CommandSettings:
     speed_grid: Annotated[int, Range(8, 512)]
 
     def __post_init__(self) -> None:
-        check(self.min_speed_mps <= self.max_speed_mps, "command.min_speed_mps", self.min_speed_mps,
-              f"0 .. max_speed_mps ({self.max_speed_mps})")
+        check(
+            self.min_speed_mps <= self.max_speed_mps,
+            "command.min_speed_mps",
+            self.min_speed_mps,
+            f"0 .. max_speed_mps ({self.max_speed_mps})",
+        )
 
 
 @dataclass(frozen=True)
@@ -107,12 +115,24 @@ class ArrivalSettings:
     min_approach_mps: Speed  # no cap (approach, turn slowdown) slows the boat below this outside radius_m [m/s]
 
     def __post_init__(self) -> None:
-        check(self.approach_radius_m >= self.radius_m, "arrival.approach_radius_m", self.approach_radius_m,
-              f">= radius_m ({self.radius_m})")
-        check(self.settle_radius_m <= self.radius_m, "arrival.settle_radius_m", self.settle_radius_m,
-              f"0 .. radius_m ({self.radius_m})")
-        check(self.reacquire_radius_m > self.radius_m, "arrival.reacquire_radius_m", self.reacquire_radius_m,
-              f"> radius_m ({self.radius_m})")
+        check(
+            self.approach_radius_m >= self.radius_m,
+            "arrival.approach_radius_m",
+            self.approach_radius_m,
+            f">= radius_m ({self.radius_m})",
+        )
+        check(
+            self.settle_radius_m <= self.radius_m,
+            "arrival.settle_radius_m",
+            self.settle_radius_m,
+            f"0 .. radius_m ({self.radius_m})",
+        )
+        check(
+            self.reacquire_radius_m > self.radius_m,
+            "arrival.reacquire_radius_m",
+            self.reacquire_radius_m,
+            f"> radius_m ({self.radius_m})",
+        )
 
 
 @dataclass(frozen=True)
@@ -180,8 +200,12 @@ class FleetSettings:
     neighbour_timeout_s: Annotated[float, Range(0.0, 60.0, lo_open=True)]  # forget a boat not heard for this long [s]
 
     def __post_init__(self) -> None:
-        check(self.slot_separation_m >= self.min_separation_m, "fleet.slot_separation_m", self.slot_separation_m,
-              f">= min_separation_m ({self.min_separation_m})")
+        check(
+            self.slot_separation_m >= self.min_separation_m,
+            "fleet.slot_separation_m",
+            self.slot_separation_m,
+            f">= min_separation_m ({self.min_separation_m})",
+        )
 
 
 @dataclass(frozen=True)
@@ -200,14 +224,17 @@ class GuidanceConfig:
     fleet: FleetSettings
 
     def __post_init__(self) -> None:
-        check(bool(VEHICLE_ID.match(self.vehicle_id)), "vehicle_id", self.vehicle_id,
-              "1-64 characters of A-Z a-z 0-9 _ -")
-        check(self.limits.max_speed_mps >= self.command.max_speed_mps, "limits.max_speed_mps",
-              self.limits.max_speed_mps, f">= command.max_speed_mps ({self.command.max_speed_mps})")
+        check(
+            bool(VEHICLE_ID.match(self.vehicle_id)), "vehicle_id", self.vehicle_id, "1-64 characters of A-Z a-z 0-9 _ -"
+        )
+        check(
+            self.limits.max_speed_mps >= self.command.max_speed_mps,
+            "limits.max_speed_mps",
+            self.limits.max_speed_mps,
+            f">= command.max_speed_mps ({self.command.max_speed_mps})",
+        )
 
 
 def load(user_file: str | Path | None = None, overrides: dict[str, Any] | None = None) -> GuidanceConfig:
     """Defaults, then ``user_file``, then ``overrides`` (nested like the YAML), checked."""
     return config.build(GuidanceConfig, config.load_layers("guidance", user_file, overrides or {}))
-
-

@@ -44,8 +44,13 @@ class Supervisor:
         self.period = 1.0 / cfg.command.rate_hz  # vehicle seconds between setpoints
         self.vehicle = VehicleState(cfg)  # checked estimates: position, velocity, heading, current
         a = cfg.arrival
-        self.station = StationKeeper(a.station_gain, a.integral_gain_per_s2, a.integral_limit_mps,
-                                     cfg.command.max_speed_mps, deadband_m=a.radius_m)
+        self.station = StationKeeper(
+            a.station_gain,
+            a.integral_gain_per_s2,
+            a.integral_limit_mps,
+            cfg.command.max_speed_mps,
+            deadband_m=a.radius_m,
+        )
         self.progress = ProgressWatchdog(cfg.failsafe.stall_s, cfg.failsafe.stall_progress_m)
         self.heartbeat_wall: float | None = None  # the vehicle's last heartbeat (service clock) [s]
         self.mode: int | None = None
@@ -122,8 +127,7 @@ class Supervisor:
             return False
         self._place_geodetic_goal()
         if self.arrived:  # status honesty: leave arrived on the fix that shows the drift, not a tick later
-            p, _ = self.vehicle.tracker.predict(fix.t_s)
-            self._check_reacquire(self.law.distance_to_goal(p), fix.t_s)
+            self.reacquire_if_drifted(self.law.distance_to_goal(self.vehicle.tracker.predict(fix.t_s)[0]), fix.t_s)
         return True
 
     def update_current(self, t: float) -> None:
@@ -145,8 +149,7 @@ class Supervisor:
             self.engaged = False  # a rebooted vehicle's mode is not the pilot's choice: take GUIDED again
 
     def on_operator(self, request: ev.OperatorHold) -> None:
-        """An operator's hold (zero velocity, state hold, until resumed) or resume (guide again, progress
-        watched afresh: the boat stood still on purpose)."""
+        """An operator's hold (zero velocity, state hold) or resume (guide again, progress watched afresh)."""
         if request.active:
             self._note(logging.WARNING, f"operator hold from {request.source}")
             self.operator_hold = request.source
@@ -246,7 +249,7 @@ class Supervisor:
         current = estimator.current_ned if heading is not None and estimator.updates else None
         distance = law.distance_to_goal(p)
         if self.arrived:
-            self._check_reacquire(distance, now)
+            self.reacquire_if_drifted(distance, now)
         elif distance <= cfg.arrival.radius_m:
             self.arrived, self.degraded, self.back_reason = True, False, ""
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
@@ -314,21 +317,14 @@ class Supervisor:
         if not (done or now - self.arrived_t >= arrival.settle_timeout_s):
             return False
         self.settled = True
-        self._note(
-            logging.INFO,
-            f"settled {distance:.3f} m from the goal after {now - self.arrived_t:.1f} s; "
-            f"switching to {arrival.on_arrival.value.upper()}",
-        )
+        after, mode = now - self.arrived_t, arrival.on_arrival.value.upper()
+        self._note(logging.INFO, f"settled {distance:.3f} m from the goal after {after:.1f} s; switching to {mode}")
         return True
 
     def reacquire_if_drifted(self, distance: float, now: float) -> None:
         """Leave arrived for guiding if ``distance`` [m] from the goal is beyond reacquire_radius_m."""
-        if self.arrived:
-            self._check_reacquire(distance, now)
-
-    def _check_reacquire(self, distance: float, now: float) -> None:
         limit = self.cfg.arrival.reacquire_radius_m
-        if distance <= limit:
+        if not self.arrived or distance <= limit:
             return
         reason = f"drifted {distance:.2f} m from the goal, beyond reacquire_radius_m {limit:g}: guiding back"
         self.back_reason = reason.replace(": guiding back", "; ")
@@ -345,8 +341,15 @@ class Supervisor:
         self.degraded = False
 
     # ------------------------------------------------------------------------------ output
-    def _out(self, v: tuple[float, float], state: S, reason: str, send: bool, t: float,
-             requests: list[ev.Request] | tuple[ev.Request, ...] = ()) -> ev.Decision:
+    def _out(
+        self,
+        v: tuple[float, float],
+        state: S,
+        reason: str,
+        send: bool,
+        t: float,
+        requests: list[ev.Request] | tuple[ev.Request, ...] = (),
+    ) -> ev.Decision:
         if self.output_fault and state in (S.GUIDING, S.ARRIVED):
             state, reason = S.FAULT, f"setpoints are not going out ({self.reason})"
         self.separation_active = False

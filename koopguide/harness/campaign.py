@@ -47,11 +47,15 @@ FLOWS: dict[str, dict[str, Any]] = {
     "toward_W": _uniform(270.0),
     # The Zshape domain of the README's mission spans N -0.1 .. 2.0 m, E -1.8 .. 0 m.
     # A Lamb-Oseen vortex centred on it: about 0.05 m/s at its core radius.
-    "vortex": {"kinds": ["vortex"], "vortex": {"center_ned_m": [0.9, -0.9], "circulation_m2ps": 0.2,
-                                               "core_radius_m": 0.4}},
+    "vortex": {
+        "kinds": ["vortex"],
+        "vortex": {"center_ned_m": [0.9, -0.9], "circulation_m2ps": 0.2, "core_radius_m": 0.4},
+    },
     # A double gyre over it (2s x s = 2.5 m x 1.25 m, north x east): up to ~0.09 m/s, period 10 s.
-    "double_gyre": {"kinds": ["double_gyre"], "double_gyre": {"origin_ned_m": [-0.3, -1.5], "scale_m": 1.25,
-                                                               "amplitude_mps": 0.02}},
+    "double_gyre": {
+        "kinds": ["double_gyre"],
+        "double_gyre": {"origin_ned_m": [-0.3, -1.5], "scale_m": 1.25, "amplitude_mps": 0.02},
+    },
 }
 #: Sensor noise and latency of every run (the simulator's position sensor).
 SENSORS = {"sensors": {"position": {"noise_std_m": 0.005, "velocity_noise_std_mps": 0.01, "latency_s": 0.05}}}
@@ -91,8 +95,14 @@ class RunResult:
     error: str | None = None
 
 
-def streamline(velocity_ned: Any, start: np.ndarray, goal: np.ndarray, radius_m: float, step_m: float = 0.01,
-               max_steps: int = 20_000) -> np.ndarray | None:
+def streamline(
+    velocity_ned: Any,
+    start: np.ndarray,
+    goal: np.ndarray,
+    radius_m: float,
+    step_m: float = 0.01,
+    max_steps: int = 20_000,
+) -> np.ndarray | None:
     """The field's streamline from ``start`` (NED, m) until within ``radius_m`` of ``goal``: (K, 2) points,
     or None when it does not get there in ``max_steps`` steps of ``step_m`` (a stall or a cycle)."""
     points = [np.asarray(start, dtype=float)]
@@ -138,9 +148,15 @@ def run_one(spec: RunSpec) -> RunResult:
     logging.basicConfig(level=logging.ERROR)  # the service's state changes are in the results, not on stderr
 
     sim_extra = {**SENSORS, "vehicle": spec.vehicle}
-    cfg, sim_cfg, pose = mission_at(Path(spec.model), np.array(spec.start_model), spec.speedup,
-                                    FLOWS[spec.flow], vehicle_id=f"c{spec.start_index}", seed=spec.seed,
-                                    sim_extra=sim_extra)
+    cfg, sim_cfg, pose = mission_at(
+        Path(spec.model),
+        np.array(spec.start_model),
+        spec.speedup,
+        FLOWS[spec.flow],
+        vehicle_id=f"c{spec.start_index}",
+        seed=spec.seed,
+        sim_extra=sim_extra,
+    )
     result = asyncio.run(fly(cfg, Path(spec.model), sim_cfg, spec.timeout_s, settle_s=spec.hold_s))
     law, goal = result.law, result.law.goal_ned
     track = result.track
@@ -161,11 +177,21 @@ def run_one(spec: RunSpec) -> RunResult:
     far = bool(hold_max is not None and reacquire is not None and _arrived_while_far(result, track, goal, reacquire))
     arrive = result.arrival_time_s
     return RunResult(
-        vehicle=spec.vehicle, flow=spec.flow, start_index=spec.start_index, start_ned=(pose[0], pose[1]),
-        arrived=result.arrived, time_to_arrive_s=arrive, ideal_time_s=ideal,
+        vehicle=spec.vehicle,
+        flow=spec.flow,
+        start_index=spec.start_index,
+        start_ned=(pose[0], pose[1]),
+        arrived=result.arrived,
+        time_to_arrive_s=arrive,
+        ideal_time_s=ideal,
         time_ratio=None if arrive is None or not ideal else arrive / ideal,
-        deviation_rms_m=dev_rms, deviation_max_m=dev_max, hold_p95_m=hold_p95, hold_max_m=hold_max,
-        final_distance_m=result.final_distance_m, max_setpoint_mps=result.max_setpoint_mps, arrived_but_far=far,
+        deviation_rms_m=dev_rms,
+        deviation_max_m=dev_max,
+        hold_p95_m=hold_p95,
+        hold_max_m=hold_max,
+        final_distance_m=result.final_distance_m,
+        max_setpoint_mps=result.max_setpoint_mps,
+        arrived_but_far=far,
         track=np.round(track[:: max(1, len(track) // 400)], 3).tolist(),
     )
 
@@ -186,9 +212,25 @@ def _run_guarded(spec: RunSpec) -> RunResult:
     try:
         return run_one(spec)
     except Exception as exc:
-        return RunResult(spec.vehicle, spec.flow, spec.start_index, (float("nan"), float("nan")), False, None,
-                         None, None, None, None, None, None, float("nan"), 0.0, False, [],
-                         error=f"{type(exc).__name__}: {exc}")
+        return RunResult(
+            spec.vehicle,
+            spec.flow,
+            spec.start_index,
+            (float("nan"), float("nan")),
+            False,
+            None,
+            None,
+            None,
+            None,
+            None,
+            None,
+            None,
+            float("nan"),
+            0.0,
+            False,
+            [],
+            error=f"{type(exc).__name__}: {exc}",
+        )
 
 
 def run_campaign(specs: list[RunSpec], workers: int, progress: bool = True) -> list[RunResult]:
@@ -200,12 +242,21 @@ def run_campaign(specs: list[RunSpec], workers: int, progress: bool = True) -> l
         for result in pool.map(_run_guarded, specs):
             results.append(result)
             if progress:
-                verdict = ("ERROR " + result.error) if result.error else (
-                    f"arrived in {result.time_to_arrive_s:.1f} s" if result.arrived else
-                    f"did not arrive ({result.final_distance_m:.2f} m)")
-                print(f"  [{len(results):3d}/{len(specs)}] {result.vehicle:11s} {result.flow:11s} "
-                      f"start {result.start_index:2d}: {verdict}  ({time.monotonic() - started:.0f} s)",
-                      file=sys.stderr, flush=True)
+                verdict = (
+                    ("ERROR " + result.error)
+                    if result.error
+                    else (
+                        f"arrived in {result.time_to_arrive_s:.1f} s"
+                        if result.arrived
+                        else f"did not arrive ({result.final_distance_m:.2f} m)"
+                    )
+                )
+                print(
+                    f"  [{len(results):3d}/{len(specs)}] {result.vehicle:11s} {result.flow:11s} "
+                    f"start {result.start_index:2d}: {verdict}  ({time.monotonic() - started:.0f} s)",
+                    file=sys.stderr,
+                    flush=True,
+                )
     return results
 
 
@@ -218,8 +269,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--flows", type=name_list, default=list(FLOWS), help=f"of {', '.join(FLOWS)}")
     parser.add_argument("--starts", type=int, default=6, help="random starts per vehicle and flow")
     parser.add_argument("--workers", type=int, default=2, help="parallel worker processes")
-    parser.add_argument("--speedup", type=float, default=10.0,
-                        help="simulated seconds per wall second (x20 starves the service on a loaded machine)")
+    parser.add_argument(
+        "--speedup",
+        type=float,
+        default=10.0,
+        help="simulated seconds per wall second (x20 starves the service on a loaded machine)",
+    )
     parser.add_argument("--timeout-s", type=float, default=120.0, help="simulated seconds allowed to arrive")
     parser.add_argument("--hold-s", type=float, default=60.0, help="simulated seconds watched after arrival")
     parser.add_argument("--seed", type=int, default=0, help="seed of the starts and of the simulator")
@@ -227,8 +282,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     unknown = [v for v in args.vehicles if v not in VEHICLES] + [f for f in args.flows if f not in FLOWS]
     if unknown:
-        raise ValueError(f"unknown vehicle or flow {unknown[0]!r} (vehicles: {', '.join(VEHICLES)}; "
-                         f"flows: {', '.join(FLOWS)})")
+        raise ValueError(
+            f"unknown vehicle or flow {unknown[0]!r} (vehicles: {', '.join(VEHICLES)}; flows: {', '.join(FLOWS)})"
+        )
     for name, value, lo in (("--starts", args.starts, 1), ("--workers", args.workers, 1)):
         if value < lo:
             raise ValueError(f"{name} must be >= {lo}, got {value}")
@@ -240,24 +296,34 @@ def main(argv: list[str] | None = None) -> int:
 
     field_ = load_field(model)
     starts = draw_starts(*field_.bounds, args.starts, args.seed)
-    specs = [RunSpec(str(model), v, f, (float(s[0]), float(s[1])), i, args.speedup, args.timeout_s, args.hold_s,
-                     args.seed + i)
-             for v in args.vehicles for f in args.flows for i, s in enumerate(starts)]
-    print(f"koopguide bench missions: {len(specs)} runs ({len(args.vehicles)} vehicles x {len(args.flows)} flows "
-          f"x {args.starts} starts), {args.workers} workers, x{args.speedup:g}", file=sys.stderr)
+    specs = [
+        RunSpec(
+            str(model), v, f, (float(s[0]), float(s[1])), i, args.speedup, args.timeout_s, args.hold_s, args.seed + i
+        )
+        for v in args.vehicles
+        for f in args.flows
+        for i, s in enumerate(starts)
+    ]
+    print(
+        f"koopguide bench missions: {len(specs)} runs ({len(args.vehicles)} vehicles x {len(args.flows)} flows "
+        f"x {args.starts} starts), {args.workers} workers, x{args.speedup:g}",
+        file=sys.stderr,
+    )
     started = time.monotonic()
     results = run_campaign(specs, args.workers)
     wall = time.monotonic() - started
     (args.output / "runs.json").write_text(json.dumps([asdict(r) for r in results], indent=1))
     position = SENSORS["sensors"]["position"]
-    setup = (f"`koopguide bench missions` with model `{model.name}`: {len(specs)} simulated missions "
-             f"({', '.join(args.vehicles)} x {', '.join(args.flows)} x {args.starts} starts drawn from the "
-             f"demonstrations' box enlarged by 10%, seed {args.seed}), speed-up x{args.speedup:g}, {args.workers} "
-             f"workers, {wall:.0f} s wall.\n\nMission: goal NED (0, 0), 0.04 m per model unit, model +x East, "
-             f"`max_speed` 0.3 m/s, arrival radius 0.15 m, {args.timeout_s:g} s allowed to arrive, {args.hold_s:g} s "
-             f"watched after arrival. Position sensor: noise {position['noise_std_m']} m, latency "
-             f"{position['latency_s']} s. Uniform currents {CURRENT_MPS} m/s toward each side; the vortex and the "
-             f"double gyre as in `koopguide/harness/campaign.py` (`FLOWS`).")
+    setup = (
+        f"`koopguide bench missions` with model `{model.name}`: {len(specs)} simulated missions "
+        f"({', '.join(args.vehicles)} x {', '.join(args.flows)} x {args.starts} starts drawn from the "
+        f"demonstrations' box enlarged by 10%, seed {args.seed}), speed-up x{args.speedup:g}, {args.workers} "
+        f"workers, {wall:.0f} s wall.\n\nMission: goal NED (0, 0), 0.04 m per model unit, model +x East, "
+        f"`max_speed` 0.3 m/s, arrival radius 0.15 m, {args.timeout_s:g} s allowed to arrive, {args.hold_s:g} s "
+        f"watched after arrival. Position sensor: noise {position['noise_std_m']} m, latency "
+        f"{position['latency_s']} s. Uniform currents {CURRENT_MPS} m/s toward each side; the vortex and the "
+        f"double gyre as in `koopguide/harness/campaign.py` (`FLOWS`)."
+    )
     campaign_report.write(args.output, results, field_, setup)
     print(f"wrote {args.output / 'report.md'} and {args.output / 'paths.png'} ({wall:.0f} s wall)", file=sys.stderr)
     return 0 if all(r.error is None for r in results) else 1

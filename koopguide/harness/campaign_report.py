@@ -30,17 +30,22 @@ def aggregate(results: list[Any]) -> list[dict[str, Any]]:
     for key in dict.fromkeys((r.vehicle, r.flow) for r in results):
         group = [r for r in results if (r.vehicle, r.flow) == key]
         arrived = [r for r in group if r.arrived]
-        rows.append({
-            "vehicle": key[0], "flow": key[1], "runs": len(group), "arrived": len(arrived),
-            "errors": sum(r.error is not None for r in group),
-            "time": _stats([r.time_to_arrive_s for r in arrived]),
-            "ratio": _stats([r.time_ratio for r in arrived]),
-            "dev_rms": _stats([r.deviation_rms_m for r in group]),
-            "dev_max": _stats([r.deviation_max_m for r in group]),
-            "hold_p95": _stats([r.hold_p95_m for r in arrived]),
-            "max_setpoint": _stats([r.max_setpoint_mps for r in group])[1],
-            "arrived_but_far": sum(r.arrived_but_far for r in group),
-        })
+        rows.append(
+            {
+                "vehicle": key[0],
+                "flow": key[1],
+                "runs": len(group),
+                "arrived": len(arrived),
+                "errors": sum(r.error is not None for r in group),
+                "time": _stats([r.time_to_arrive_s for r in arrived]),
+                "ratio": _stats([r.time_ratio for r in arrived]),
+                "dev_rms": _stats([r.deviation_rms_m for r in group]),
+                "dev_max": _stats([r.deviation_max_m for r in group]),
+                "hold_p95": _stats([r.hold_p95_m for r in arrived]),
+                "max_setpoint": _stats([r.max_setpoint_mps for r in group])[1],
+                "arrived_but_far": sum(r.arrived_but_far for r in group),
+            }
+        )
     return rows
 
 
@@ -58,7 +63,7 @@ def write(out: Path, results: list[Any], field_: Any, setup: str) -> None:
         "",
         "Time ratio = time to arrive / ideal time (the field's streamline from the start driven at `max_speed`). "
         "Deviation = distance of the true path before arrival from that streamline. Hold p95 = 95th percentile of "
-        "the true distance to the goal over the watch after arrival. \"Far\" counts runs in which the service said "
+        'the true distance to the goal over the watch after arrival. "Far" counts runs in which the service said '
         "`arrived` while the true boat was beyond the reacquire radius.",
         "",
         "| vehicle | flow | arrived | time to arrive median / max [s] | time ratio median | deviation RMS median "
@@ -73,10 +78,14 @@ def write(out: Path, results: list[Any], field_: Any, setup: str) -> None:
             f"{_fmt(row['hold_p95'][0], 3)} / {_fmt(row['hold_p95'][1], 3)} | {_fmt(row['max_setpoint'], 3)} | "
             f"{row['arrived_but_far']} | {row['errors']} |"
         )
-    lines += ["", "## Every run", "",
-              "| vehicle | flow | start | start NED [m] | arrived | time [s] | ratio | dev RMS / max [m] | "
-              "hold p95 [m] | final [m] | largest setpoint [m/s] |",
-              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    lines += [
+        "",
+        "## Every run",
+        "",
+        "| vehicle | flow | start | start NED [m] | arrived | time [s] | ratio | dev RMS / max [m] | "
+        "hold p95 [m] | final [m] | largest setpoint [m/s] |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
     for r in results:
         note = f" ({r.error})" if r.error else ""
         lines.append(
@@ -100,8 +109,12 @@ def plot_paths(output: Path, results: list[Any], field_: Any) -> None:
     from koopguide.guidance import settings
     from koopguide.guidance.law.command import GuidanceLaw
 
-    cfg = settings.load(overrides={"frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0},
-                                   "command": {"max_speed_mps": 0.3}})
+    cfg = settings.load(
+        overrides={
+            "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0},
+            "command": {"max_speed_mps": 0.3},
+        }
+    )
     law = GuidanceLaw.from_config(field_, cfg)
     vehicles = list(dict.fromkeys(r.vehicle for r in results))
     flows = list(dict.fromkeys(r.flow for r in results))
@@ -111,8 +124,14 @@ def plot_paths(output: Path, results: list[Any], field_: Any) -> None:
     ge, gn = np.meshgrid(e_lin, n_lin)
     V = np.array([law.field_velocity_ned(p) for p in np.column_stack([gn.ravel(), ge.ravel()])])
     vn, ve = V[:, 0].reshape(ge.shape), V[:, 1].reshape(ge.shape)
-    fig, axes = plt.subplots(len(vehicles), len(flows), figsize=(2.6 * len(flows), 2.8 * len(vehicles)),
-                             squeeze=False, sharex=True, sharey=True)
+    fig, axes = plt.subplots(
+        len(vehicles),
+        len(flows),
+        figsize=(2.6 * len(flows), 2.8 * len(vehicles)),
+        squeeze=False,
+        sharex=True,
+        sharey=True,
+    )
     for i, vehicle in enumerate(vehicles):
         for j, flow in enumerate(flows):
             ax = axes[i, j]

@@ -169,8 +169,10 @@ async def measure_rate(model: Path, rate_hz: float, seconds: float, log_dir: Pat
         while daemon.state is not GuidanceState.GUIDING:
             check_alive("warm-up")
             if time.monotonic() > deadline:
-                raise BenchError(f"{rate_hz:g} Hz: the daemon was not guiding within {WARMUP_TIMEOUT_S:g} s "
-                                 f"(state {daemon.state.value}: {daemon.reason})")
+                raise BenchError(
+                    f"{rate_hz:g} Hz: the daemon was not guiding within {WARMUP_TIMEOUT_S:g} s "
+                    f"(state {daemon.state.value}: {daemon.reason})"
+                )
             await asyncio.sleep(0.05)
 
         link = daemon.link
@@ -201,11 +203,19 @@ async def measure_rate(model: Path, rate_hz: float, seconds: float, log_dir: Pat
     wall_s, sim_s = wall_1 - wall_0, sim_1 - sim_0
     if sim_s <= 0:
         raise BenchError(f"{rate_hz:g} Hz: vehicle time did not advance during the window")
-    p50, p99, worst = (np.percentile(latencies_ms, [50, 99, 100]).tolist() if latencies_ms else (None,) * 3)
+    p50, p99, worst = np.percentile(latencies_ms, [50, 99, 100]).tolist() if latencies_ms else (None,) * 3
     return RateFigures(
-        rate_hz=rate_hz, setpoints_per_s=(sent_1 - sent_0) / sim_s, latency_p50_ms=p50, latency_p99_ms=p99,
-        latency_max_ms=worst, samples=len(latencies_ms), cpu_pct=100.0 * (cpu_1 - cpu_0) / wall_s,
-        window_wall_s=wall_s, window_sim_s=sim_s, messages_per_s=(received_1 - received_0) / wall_s, states=states,
+        rate_hz=rate_hz,
+        setpoints_per_s=(sent_1 - sent_0) / sim_s,
+        latency_p50_ms=p50,
+        latency_p99_ms=p99,
+        latency_max_ms=worst,
+        samples=len(latencies_ms),
+        cpu_pct=100.0 * (cpu_1 - cpu_0) / wall_s,
+        window_wall_s=wall_s,
+        window_sim_s=sim_s,
+        messages_per_s=(received_1 - received_0) / wall_s,
+        states=states,
     )
 
 
@@ -231,18 +241,24 @@ def verdict(figures: list[RateFigures]) -> dict[str, Any]:
 
 
 def print_table(machine: dict[str, Any], figures: list[RateFigures], target: dict[str, Any]) -> None:
-    print(f"guidance bench: {machine['cpu_count']} CPUs, Python {machine['python']} ({machine['platform']}); "
-          f"model {machine['model']}; {machine['seconds']:g} s window per rate, fixes at {POSITION_RATE_HZ:g} Hz")
-    print(f"{'rate_hz':>7}  {'setpoints/s':>11}  {'p50 ms':>7}  {'p99 ms':>7}  {'max ms':>7}  {'samples':>7}  "
-          f"{'CPU %':>6}  {'msgs/s':>6}  states")
+    print(
+        f"guidance bench: {machine['cpu_count']} CPUs, Python {machine['python']} ({machine['platform']}); "
+        f"model {machine['model']}; {machine['seconds']:g} s window per rate, fixes at {POSITION_RATE_HZ:g} Hz"
+    )
+    print(
+        f"{'rate_hz':>7}  {'setpoints/s':>11}  {'p50 ms':>7}  {'p99 ms':>7}  {'max ms':>7}  {'samples':>7}  "
+        f"{'CPU %':>6}  {'msgs/s':>6}  states"
+    )
 
     def ms(value: float | None) -> str:
         return f"{value:7.3f}" if value is not None else f"{'-':>7}"
 
     for f in figures:
-        print(f"{f.rate_hz:7g}  {f.setpoints_per_s:11.2f}  {ms(f.latency_p50_ms)}  {ms(f.latency_p99_ms)}  "
-              f"{ms(f.latency_max_ms)}  {f.samples:7d}  {f.cpu_pct:6.2f}  {f.messages_per_s:6.1f}  "
-              f"{','.join(f.states)}")
+        print(
+            f"{f.rate_hz:7g}  {f.setpoints_per_s:11.2f}  {ms(f.latency_p50_ms)}  {ms(f.latency_p99_ms)}  "
+            f"{ms(f.latency_max_ms)}  {f.samples:7d}  {f.cpu_pct:6.2f}  {f.messages_per_s:6.1f}  "
+            f"{','.join(f.states)}"
+        )
     measured = f"{target['p99_ms']:.3f} ms" if target["p99_ms"] is not None else "no samples"
     print(f"target p99 <= {TARGET_P99_MS:g} ms at {TARGET_RATE_HZ:g} Hz: {target['result']} ({measured})")
 
@@ -261,11 +277,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="koopguide bench guidance", description=__doc__.splitlines()[0])
     parser.add_argument("--model", type=Path, help="model file (default out/zshape.pt, else Zshape trained now)")
     parser.add_argument("--seconds", type=float, default=10.0, help="measured wall seconds per rate (default 10)")
-    parser.add_argument("--rates", type=rate_list, default=list(DEFAULT_RATES_HZ),
-                        help="command rates in Hz, comma-separated (default 10,50)")
+    parser.add_argument(
+        "--rates",
+        type=rate_list,
+        default=list(DEFAULT_RATES_HZ),
+        help="command rates in Hz, comma-separated (default 10,50)",
+    )
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
-    parser.add_argument("--log", action="store_true", help="the daemon writes a mission log (koopguide run --log) "
-                        "to a temporary folder: the cost of logging")
+    parser.add_argument(
+        "--log",
+        action="store_true",
+        help="the daemon writes a mission log (koopguide run --log) to a temporary folder: the cost of logging",
+    )
     args = parser.parse_args(argv)
     if not args.seconds > 0:
         parser.error(f"--seconds must be > 0, got {args.seconds:g}")
@@ -278,9 +301,14 @@ def main(argv: list[str] | None = None) -> int:
     except BenchError as exc:
         print(f"koopguide bench guidance: error: {exc}", file=sys.stderr)
         return 1
-    machine = {"cpu_count": os.cpu_count(), "python": platform.python_version(),
-               "platform": platform.platform(terse=True), "model": model_label, "seconds": args.seconds,
-               "mission_log": args.log}
+    machine = {
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "platform": platform.platform(terse=True),
+        "model": model_label,
+        "seconds": args.seconds,
+        "mission_log": args.log,
+    }
     target = verdict(figures)
     if args.json:
         print(json.dumps({**machine, "rates": [asdict(f) for f in figures], "target": target}, indent=2))

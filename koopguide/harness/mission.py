@@ -46,16 +46,30 @@ def tank_around(points_ned: np.ndarray, margin_m: float = 0.6) -> dict[str, list
     lo, hi = points_ned.min(axis=0) - margin_m, points_ned.max(axis=0) + margin_m
     size = np.maximum(hi - lo, TANK_M)
     mid = 0.5 * (lo + hi)
-    return {"north_m": [float(mid[0] - size[0] / 2), float(mid[0] + size[0] / 2)],
-            "east_m": [float(mid[1] - size[1] / 2), float(mid[1] + size[1] / 2)]}
+    return {
+        "north_m": [float(mid[0] - size[0] / 2), float(mid[0] + size[0] / 2)],
+        "east_m": [float(mid[1] - size[1] / 2), float(mid[1] + size[1] / 2)],
+    }
 
 
-def sim_overrides(pose: tuple[float, float, float], port: int, world: dict[str, list[float]], speedup: float,
-                  flow: dict[str, Any] | None = None, seed: int = 0) -> dict[str, Any]:
+def sim_overrides(
+    pose: tuple[float, float, float],
+    port: int,
+    world: dict[str, list[float]],
+    speedup: float,
+    flow: dict[str, Any] | None = None,
+    seed: int = 0,
+) -> dict[str, Any]:
     """The simulator config for one boat at ``pose`` sending MAVLink to the service on ``port``."""
-    return {"seed": seed, "speedup": speedup, "start_poses": [list(pose)], "world": {"walls": True, **world},
-            "mavlink": {"endpoints": [f"udpout:127.0.0.1:{port}"]},
-            "flow": flow or {"kinds": ["none"]}, "recorder": {"rate_hz": 10.0}}
+    return {
+        "seed": seed,
+        "speedup": speedup,
+        "start_poses": [list(pose)],
+        "world": {"walls": True, **world},
+        "mavlink": {"endpoints": [f"udpout:127.0.0.1:{port}"]},
+        "flow": flow or {"kinds": ["none"]},
+        "recorder": {"rate_hz": 10.0},
+    }
 
 
 @dataclass
@@ -72,8 +86,16 @@ class MissionResult:
     law: GuidanceLaw  # the service's guidance law (its field, frame and speed gain)
 
 
-async def fly(cfg: GuidanceConfig, model: Path, sim_cfg: Any, timeout_s: float, settle_s: float = 20.0,
-              zenoh_config: Any | None = None, progress: bool = False, log_path: Path | None = None) -> MissionResult:
+async def fly(
+    cfg: GuidanceConfig,
+    model: Path,
+    sim_cfg: Any,
+    timeout_s: float,
+    settle_s: float = 20.0,
+    zenoh_config: Any | None = None,
+    progress: bool = False,
+    log_path: Path | None = None,
+) -> MissionResult:
     """Run one mission: until arrival plus ``settle_s`` simulated seconds, or ``timeout_s`` after start;
     ``log_path``: the service's mission log (MCAP, as ``koopguide run --log``)."""
     from koopguide.guidance.daemon import GuidanceDaemon
@@ -110,8 +132,9 @@ async def fly(cfg: GuidanceConfig, model: Path, sim_cfg: Any, timeout_s: float, 
     return summarize(daemon, records, t_start, t_arrived)
 
 
-def summarize(daemon: Any, records: list[dict[str, Any]], t_start: float | None,
-              t_arrived: float | None) -> MissionResult:
+def summarize(
+    daemon: Any, records: list[dict[str, Any]], t_start: float | None, t_arrived: float | None
+) -> MissionResult:
     states = [r for r in records if r.get("kind") == "state"]
     track = np.array([[r["t"], r["n"], r["e"]] for r in states]) if states else np.zeros((0, 3))
     goal = daemon.law.goal_ned
@@ -124,8 +147,12 @@ def summarize(daemon: Any, records: list[dict[str, Any]], t_start: float | None,
         arrived=t_arrived is not None,
         arrival_time_s=None if t_arrived is None or t_start is None else t_arrived - t_start,
         arrived_at_s=t_arrived,
-        track=track, transitions=list(daemon.transitions), max_setpoint_mps=daemon.max_cmd_speed,
-        final_distance_m=float(dist[-1]), max_distance_after_arrival_m=after, law=daemon.law,
+        track=track,
+        transitions=list(daemon.transitions),
+        max_setpoint_mps=daemon.max_cmd_speed,
+        final_distance_m=float(dist[-1]),
+        max_distance_after_arrival_m=after,
+        law=daemon.law,
         mode_before_exit=daemon.mode_before_exit,
     )
 
@@ -135,13 +162,23 @@ def print_progress(status: dict[str, Any]) -> None:
     where = f"N {pos[0]:+.2f} E {pos[1]:+.2f} m" if pos else "no position yet"
     dist = status["distance_to_goal_m"]
     speed = math.hypot(*status["cmd_velocity_ned"])
-    print(f"  t {status['vehicle_time_s']:6.1f} s  {status['state']:8s} {status['mode'] or '-':7s} {where}  "
-          f"to goal {dist if dist is not None else float('nan'):.2f} m  cmd {speed:.2f} m/s", file=sys.stderr)
+    print(
+        f"  t {status['vehicle_time_s']:6.1f} s  {status['state']:8s} {status['mode'] or '-':7s} {where}  "
+        f"to goal {dist if dist is not None else float('nan'):.2f} m  cmd {speed:.2f} m/s",
+        file=sys.stderr,
+    )
 
 
-def mission_at(model: Path, start_model: np.ndarray, speedup: float, flow: dict[str, Any] | None = None,
-               vehicle_id: str = "demo", seed: int = 0, sim_extra: dict[str, Any] | None = None,
-               guidance_extra: dict[str, Any] | None = None) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
+def mission_at(
+    model: Path,
+    start_model: np.ndarray,
+    speedup: float,
+    flow: dict[str, Any] | None = None,
+    vehicle_id: str = "demo",
+    seed: int = 0,
+    sim_extra: dict[str, Any] | None = None,
+    guidance_extra: dict[str, Any] | None = None,
+) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
     """The README's mission set-up from any model point: goal at NED (0, 0), 0.04 m per unit, model +x
     East, 0.3 m/s top speed; the boat starts at ``start_model`` heading along the field, in a tank around
     the model's domain. ``flow`` is the simulator's ``flow`` section (None: calm water); ``sim_extra`` and
@@ -152,10 +189,18 @@ def mission_at(model: Path, start_model: np.ndarray, speedup: float, flow: dict[
     from sitl import config as sitl_config
 
     port = free_udp_port()
-    cfg = settings.load(overrides=config.merge({
-        "vehicle_id": vehicle_id, "arm": True, "mavlink": {"endpoint": f"udp:127.0.0.1:{port}"},
-        "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0}, "command": {"max_speed_mps": 0.3},
-    }, guidance_extra or {}))
+    cfg = settings.load(
+        overrides=config.merge(
+            {
+                "vehicle_id": vehicle_id,
+                "arm": True,
+                "mavlink": {"endpoint": f"udp:127.0.0.1:{port}"},
+                "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0},
+                "command": {"max_speed_mps": 0.3},
+            },
+            guidance_extra or {},
+        )
+    )
     field_ = load_field(model)
     frame = ModelFrame.place(field_.goal, cfg.frame)
     pose = demo_start_pose(field_, frame, np.asarray(start_model, dtype=float))
@@ -166,8 +211,9 @@ def mission_at(model: Path, start_model: np.ndarray, speedup: float, flow: dict[
     return cfg, sitl_config.load(overrides=overrides), pose
 
 
-def demo_mission(model: Path, start_index: int, current_mps: float, speedup: float, vehicle_id: str = "demo",
-                 seed: int = 0) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
+def demo_mission(
+    model: Path, start_index: int, current_mps: float, speedup: float, vehicle_id: str = "demo", seed: int = 0
+) -> tuple[GuidanceConfig, Any, tuple[float, float, float]]:
     """The README's mission from a Zshape demo start, in a uniform current toward the north (across the
     field's final leg)."""
     from koopguide.base import data
@@ -202,24 +248,50 @@ def run_demo(args: Any) -> int:
         print(f"koopguide demo: no cached model; training Zshape into {model}", file=sys.stderr)
         train_to_file(data.load_lasa("Zshape"), model, seed=0)
     cfg, sim_cfg, pose = demo_mission(model, args.start, args.current_mps, args.speedup)
-    print(f"koopguide demo: boat at N {pose[0]:.2f} E {pose[1]:.2f} m heading {pose[2]:.0f} deg, goal N 0 E 0, "
-          f"current {args.current_mps:.2f} m/s toward north, simulator x{args.speedup:g}; "
-          f"status on zenoh koopguide/{cfg.vehicle_id}/status (watch: koopguide monitor)", file=sys.stderr)
+    print(
+        f"koopguide demo: boat at N {pose[0]:.2f} E {pose[1]:.2f} m heading {pose[2]:.0f} deg, goal N 0 E 0, "
+        f"current {args.current_mps:.2f} m/s toward north, simulator x{args.speedup:g}; "
+        f"status on zenoh koopguide/{cfg.vehicle_id}/status (watch: koopguide monitor)",
+        file=sys.stderr,
+    )
     log = args.out / "demo.mcap"
-    result = asyncio.run(fly(cfg, model, sim_cfg, args.timeout_s, settle_s=DEMO_SETTLE_S,
-                             zenoh_config=zenoh_config, progress=True, log_path=log))
+    result = asyncio.run(
+        fly(
+            cfg,
+            model,
+            sim_cfg,
+            args.timeout_s,
+            settle_s=DEMO_SETTLE_S,
+            zenoh_config=zenoh_config,
+            progress=True,
+            log_path=log,
+        )
+    )
     world = sim_cfg.world
     box = np.array([[world.north_m[0], world.east_m[0]], [world.north_m[1], world.east_m[1]]])
     flow = Flow(sim_cfg.flow, np.random.default_rng(0))
     png = args.out / "demo.png"
-    verdict = (f"arrived in {result.arrival_time_s:.1f} s" if result.arrived
-               else f"did not arrive within {args.timeout_s:g} s")
-    plot_mission(png, result.law.field_velocity_ned, box, result.track, pose[:2], cfg.frame.goal_ned,
-                 cfg.arrival.radius_m, lambda n, e: flow.velocity(n, e, 0.0), f"koopguide demo: Zshape, {verdict}")
+    verdict = (
+        f"arrived in {result.arrival_time_s:.1f} s" if result.arrived else f"did not arrive within {args.timeout_s:g} s"
+    )
+    plot_mission(
+        png,
+        result.law.field_velocity_ned,
+        box,
+        result.track,
+        pose[:2],
+        cfg.frame.goal_ned,
+        cfg.arrival.radius_m,
+        lambda n, e: flow.velocity(n, e, 0.0),
+        f"koopguide demo: Zshape, {verdict}",
+    )
     gif = args.out / "demo.gif"
     frames = render_replay(read_mission(log), gif)
     after = result.max_distance_after_arrival_m
-    print(f"koopguide demo: {verdict}; largest setpoint {result.max_setpoint_mps:.3f} m/s"
-          + (f"; within {after:.2f} m of the goal for {DEMO_SETTLE_S:.0f} s after arrival" if after is not None else "")
-          + f"; wrote {png}, {log} and {gif} ({frames} frames)", file=sys.stderr)
+    print(
+        f"koopguide demo: {verdict}; largest setpoint {result.max_setpoint_mps:.3f} m/s"
+        + (f"; within {after:.2f} m of the goal for {DEMO_SETTLE_S:.0f} s after arrival" if after is not None else "")
+        + f"; wrote {png}, {log} and {gif} ({frames} frames)",
+        file=sys.stderr,
+    )
     return 0 if result.arrived else 1

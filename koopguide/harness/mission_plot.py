@@ -12,9 +12,17 @@ from pathlib import Path
 import numpy as np
 
 
-def plot_mission(output: Path, velocity_ned: Callable[[np.ndarray], np.ndarray], box_ned: np.ndarray,
-                 track: np.ndarray, start_ned: tuple[float, float], goal_ned: tuple[float, float],
-                 arrive_radius_m: float, flow_ned: Callable[[float, float], tuple], title: str) -> None:
+def plot_mission(
+    output: Path,
+    velocity_ned: Callable[[np.ndarray], np.ndarray],
+    box_ned: np.ndarray,
+    track: np.ndarray,
+    start_ned: tuple[float, float],
+    goal_ned: tuple[float, float],
+    arrive_radius_m: float,
+    flow_ned: Callable[[float, float], tuple],
+    title: str,
+) -> None:
     """Write the PNG. ``velocity_ned((N, 2) NED points) -> (N, 2)`` is the guidance field [m/s];
     ``box_ned`` = [[N_min, E_min], [N_max, E_max]] the area to draw."""
     import matplotlib
@@ -34,8 +42,9 @@ def plot_mission(output: Path, velocity_ned: Callable[[np.ndarray], np.ndarray],
     qe, qn = np.meshgrid(np.linspace(e_lin[0], e_lin[-1], 7), np.linspace(n_lin[0], n_lin[-1], 7))
     flow = np.array([flow_ned(a, b) for a, b in zip(qn.ravel(), qe.ravel(), strict=True)])
     if np.any(np.hypot(flow[:, 0], flow[:, 1]) > 0):
-        ax.quiver(qe.ravel(), qn.ravel(), flow[:, 1], flow[:, 0], color="tab:cyan", alpha=0.7, width=0.004,
-                  label="water flow")
+        ax.quiver(
+            qe.ravel(), qn.ravel(), flow[:, 1], flow[:, 0], color="tab:cyan", alpha=0.7, width=0.004, label="water flow"
+        )
     if len(track):
         ax.plot(track[:, 2], track[:, 1], color="tab:red", lw=1.6, label="boat (ground truth)")
     ax.plot(start_ned[1], start_ned[0], "o", color="tab:green", ms=9, label="start")

@@ -69,22 +69,36 @@ async def soak(model: Path, hours: float, speedup: float, sample_s: float, progr
         while True:
             await asyncio.sleep(0.2)
             if runner.done() or simulator.poll() is not None:
-                raise BenchError(f"stopped at simulated {daemon.clock.now():.0f} s: service done "
-                                 f"{runner.done()}, simulator exit {simulator.poll()}")
+                raise BenchError(
+                    f"stopped at simulated {daemon.clock.now():.0f} s: service done "
+                    f"{runner.done()}, simulator exit {simulator.poll()}"
+                )
             t = daemon.clock.now()
             if t < next_sample:
                 continue
             latencies = daemon.drain_latencies()
-            p50, p99 = (np.percentile(latencies, [50, 99]).tolist() if latencies else (None, None))
+            p50, p99 = np.percentile(latencies, [50, 99]).tolist() if latencies else (None, None)
             sent = daemon.setpoints_sent
-            samples.append(Sample(t, time.monotonic() - started, rss_mb(), p50, p99,
-                                  (sent - sent_before) / max(t - t_before, 1e-9), daemon.state.value))
+            samples.append(
+                Sample(
+                    t,
+                    time.monotonic() - started,
+                    rss_mb(),
+                    p50,
+                    p99,
+                    (sent - sent_before) / max(t - t_before, 1e-9),
+                    daemon.state.value,
+                )
+            )
             sent_before, t_before, next_sample = sent, t, next_sample + sample_s
             if progress:
                 s = samples[-1]
-                print(f"  t {s.t_s:7.0f} s  wall {s.wall_s:6.0f} s  RSS {s.rss_mb:6.1f} MB  p50 {s.p50_ms or 0:5.2f} "
-                      f"p99 {s.p99_ms or 0:5.2f} ms  {s.setpoints_per_s:5.1f} setpoints/s  {s.state}",
-                      file=sys.stderr, flush=True)
+                print(
+                    f"  t {s.t_s:7.0f} s  wall {s.wall_s:6.0f} s  RSS {s.rss_mb:6.1f} MB  p50 {s.p50_ms or 0:5.2f} "
+                    f"p99 {s.p99_ms or 0:5.2f} ms  {s.setpoints_per_s:5.1f} setpoints/s  {s.state}",
+                    file=sys.stderr,
+                    flush=True,
+                )
             if t >= end_s:
                 return samples
     finally:
@@ -96,8 +110,11 @@ async def soak(model: Path, hours: float, speedup: float, sample_s: float, progr
 def growth(samples: list[Sample], hours: float) -> dict[str, float | None]:
     """RSS slope over the second half, as MB over the whole soak; latency p99 first vs last quarter."""
     half = samples[len(samples) // 2 :]
-    out: dict[str, float | None] = {"rss_growth_mb_over_soak": None, "p99_first_quarter_ms": None,
-                                    "p99_last_quarter_ms": None}
+    out: dict[str, float | None] = {
+        "rss_growth_mb_over_soak": None,
+        "p99_first_quarter_ms": None,
+        "p99_last_quarter_ms": None,
+    }
     if len(half) >= 2:
         slope = np.polyfit([s.t_s for s in half], [s.rss_mb for s in half], 1)[0]  # MB per simulated s
         out["rss_growth_mb_over_soak"] = float(slope * hours * 3600.0)
@@ -130,16 +147,23 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps({"samples": [asdict(s) for s in samples], **figures}, indent=2))
         return 0
     first, last = samples[0], samples[-1]
-    print(f"soak: {last.t_s / 3600:.2f} simulated hours at {RATE_HZ:g} Hz in {last.wall_s:.0f} s wall "
-          f"(x{args.speedup:g}), {len(samples)} samples")
-    print(f"RSS {first.rss_mb:.1f} -> {last.rss_mb:.1f} MB; fitted growth over the soak "
-          f"{figures['rss_growth_mb_over_soak']:+.2f} MB (second half)")
+    print(
+        f"soak: {last.t_s / 3600:.2f} simulated hours at {RATE_HZ:g} Hz in {last.wall_s:.0f} s wall "
+        f"(x{args.speedup:g}), {len(samples)} samples"
+    )
+    print(
+        f"RSS {first.rss_mb:.1f} -> {last.rss_mb:.1f} MB; fitted growth over the soak "
+        f"{figures['rss_growth_mb_over_soak']:+.2f} MB (second half)"
+    )
+
     def ms(value: float | None) -> str:
         return "-" if value is None else f"{value:.2f} ms"
 
-    print(f"latency p99 (median of the samples): first quarter {ms(figures['p99_first_quarter_ms'])}, last quarter "
-          f"{ms(figures['p99_last_quarter_ms'])}; setpoints/s at the end {last.setpoints_per_s:.1f}; "
-          f"final state {last.state}")
+    print(
+        f"latency p99 (median of the samples): first quarter {ms(figures['p99_first_quarter_ms'])}, last quarter "
+        f"{ms(figures['p99_last_quarter_ms'])}; setpoints/s at the end {last.setpoints_per_s:.1f}; "
+        f"final state {last.state}"
+    )
     return 0
 
 

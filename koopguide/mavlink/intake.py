@@ -50,6 +50,22 @@ class LinkStats:
     dropped_out: int = 0  # messages not sent because the other end stopped reading (TCP, serial)
     reconnects: int = 0  # stream links (tcp client, serial) reopened after a loss
 
+    #: The counters a guidance status carries (docs/zenoh.md, ``link``).
+    STATUS_COUNTERS = (
+        "received",
+        "foreign",
+        "corrupt",
+        "sent",
+        "reconnects",
+        "unsigned",
+        "bad_signature",
+        "wrong_source",
+        "source_changes",
+    )
+
+    def status_counters(self) -> dict[str, int]:
+        return {name: getattr(self, name) for name in self.STATUS_COUNTERS}
+
 
 class Intake:
     """Parses bytes per source; returns the messages that are well-formed (and well-signed)."""

@@ -19,8 +19,6 @@ from tests.support.config_paths import leaf_paths, nested
 GUIDANCE_DEFAULTS = config.load_yaml(config.default_config_path("guidance"))
 
 
-
-
 def test_yaml_numbers_are_read_the_yaml_1_2_way(tmp_path: Path):
     user = tmp_path / "user.yaml"
     user.write_text("command:\n  max_speed_mps: 2e-1\n  lead_s: 5E-2\n  speed_grid: 100\n")
@@ -30,16 +28,19 @@ def test_yaml_numbers_are_read_the_yaml_1_2_way(tmp_path: Path):
     assert config.load_yaml(user)["command"]["max_speed_mps"] == pytest.approx(0.2)
 
 
-@pytest.mark.parametrize(("text", "message"), [
-    ("command:\n  max_speed_mps: 1.0e300\n", "command.max_speed_mps: 1e+300 is out of range"),
-    ("command:\n  speed_grid: 1e7\n", "command.speed_grid: expected an integer, got 10000000.0"),
-    ("command:\n  speed_grid: 100000\n", "command.speed_grid: 100000 is out of range"),
-    ("command:\n  rate_hz: .nan\n", "command.rate_hz: nan is out of range"),
-    ("estimator:\n  gate_chi2: -.inf\n", "estimator.gate_chi2: -inf is out of range"),
-    ("frame:\n  goal_ned: [0, .inf]\n", "frame.goal_ned[1]: inf is out of range"),
-    ("status:\n  rate_hz: 0\n", "status.rate_hz: 0.0 is out of range (expected a number in (0, 50])"),
-    ("command:\n  max_speed_mps: '0.3'\n", "command.max_speed_mps: expected a number, got '0.3' (str)"),
-])
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("command:\n  max_speed_mps: 1.0e300\n", "command.max_speed_mps: 1e+300 is out of range"),
+        ("command:\n  speed_grid: 1e7\n", "command.speed_grid: expected an integer, got 10000000.0"),
+        ("command:\n  speed_grid: 100000\n", "command.speed_grid: 100000 is out of range"),
+        ("command:\n  rate_hz: .nan\n", "command.rate_hz: nan is out of range"),
+        ("estimator:\n  gate_chi2: -.inf\n", "estimator.gate_chi2: -inf is out of range"),
+        ("frame:\n  goal_ned: [0, .inf]\n", "frame.goal_ned[1]: inf is out of range"),
+        ("status:\n  rate_hz: 0\n", "status.rate_hz: 0.0 is out of range (expected a number in (0, 50])"),
+        ("command:\n  max_speed_mps: '0.3'\n", "command.max_speed_mps: expected a number, got '0.3' (str)"),
+    ],
+)
 def test_absurd_numbers_are_one_line_errors_naming_the_key(tmp_path: Path, text: str, message: str):
     user = tmp_path / "user.yaml"
     user.write_text(text)

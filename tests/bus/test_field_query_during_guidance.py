@@ -47,8 +47,9 @@ def test_field_queries_during_guidance_leave_no_setpoint_gap_over_two_command_in
             with ScriptedVehicle(port, start_ned=(1.5, -1.5)) as boat:
                 await until(lambda: daemon.state.value == "guiding", 15.0)
                 t0 = boat.t
-                asker = await asyncio.create_subprocess_exec(sys.executable, "-c", asker_code,
-                                                             stdout=asyncio.subprocess.PIPE)
+                asker = await asyncio.create_subprocess_exec(
+                    sys.executable, "-c", asker_code, stdout=asyncio.subprocess.PIPE
+                )
                 out, _ = await asyncio.wait_for(asker.communicate(), 60.0)
                 t1 = boat.t
                 times = [r.t for r in boat.setpoints(since=t0) if r.t <= t1]
@@ -56,7 +57,8 @@ def test_field_queries_during_guidance_leave_no_setpoint_gap_over_two_command_in
                 replies = [json.loads(line) for line in out.decode().splitlines()]
                 assert replies == [{"n": 200, "points": 200 * 200}] * 3, replies
                 assert t1 - t0 > 1.0 and max(gaps) <= 2 * period, (
-                    f"largest setpoint gap {max(gaps):.3f} s (period {period} s)")
+                    f"largest setpoint gap {max(gaps):.3f} s (period {period} s)"
+                )
         finally:
             daemon.stop()
             await task

@@ -46,8 +46,9 @@ def run(cmd: list[str], timeout: float = 20.0) -> subprocess.CompletedProcess:
 
 
 def full_view(vehicle_id: str, now: float, **changes) -> VehicleView:
-    return VehicleView(vehicle_id, status=sample_status(vehicle_id, **changes), received_at=now - 0.25,
-                       statuses=3, alive=True)
+    return VehicleView(
+        vehicle_id, status=sample_status(vehicle_id, **changes), received_at=now - 0.25, statuses=3, alive=True
+    )
 
 
 # ------------------------------------------------------------------------------ pure table
@@ -55,23 +56,63 @@ def test_render_table_shows_every_column():
     now = 1_700_000_100.0
     vehicles = {
         "boat1": full_view("boat1", now),
-        "boat-2": VehicleView("boat-2", status=sample_status(
-            "boat-2", state="waiting", mode=None, armed=None, position_ned=None, distance_to_goal_m=None,
-            position_age_s=None, cmd_velocity_ned=[0.0, 0.0], loop_latency_ms={"p50": None, "p99": None},
-        ), received_at=now - 4.0, alive=False),
+        "boat-2": VehicleView(
+            "boat-2",
+            status=sample_status(
+                "boat-2",
+                state="waiting",
+                mode=None,
+                armed=None,
+                position_ned=None,
+                distance_to_goal_m=None,
+                position_age_s=None,
+                cmd_velocity_ned=[0.0, 0.0],
+                loop_latency_ms={"p50": None, "p99": None},
+            ),
+            received_at=now - 4.0,
+            alive=False,
+        ),
         "ghost": VehicleView("ghost", alive=True),
     }
     table = render_table(vehicles, now)
     lines = table.splitlines()
     assert "vehicles 3 (alive 2)" in lines[0]
     header, rows = lines[1], lines[2:]
-    for column in ("VEHICLE", "LIVE", "STATE", "MODE", "ARMED", "N[m]", "E[m]", "TO GOAL[m]", "CMD[m/s]",
-                   "POS AGE[s]", "MSG AGE[s]", "LOOP p50/p99[ms]", "BAD", "SUSPECT"):
+    for column in (
+        "VEHICLE",
+        "LIVE",
+        "STATE",
+        "MODE",
+        "ARMED",
+        "N[m]",
+        "E[m]",
+        "TO GOAL[m]",
+        "CMD[m/s]",
+        "POS AGE[s]",
+        "MSG AGE[s]",
+        "LOOP p50/p99[ms]",
+        "BAD",
+        "SUSPECT",
+    ):
         assert column in header
     assert [r.split()[0] for r in rows] == ["boat-2", "boat1", "ghost"]  # sorted by id
     boat1 = rows[1].split()
-    assert boat1 == ["boat1", "alive", "guiding", "GUIDED", "yes", "12.5", "-3.2", "12.9", "0.90", "0.04", "0.2",
-                     "0.8/2.5", "0", "0"]
+    assert boat1 == [
+        "boat1",
+        "alive",
+        "guiding",
+        "GUIDED",
+        "yes",
+        "12.5",
+        "-3.2",
+        "12.9",
+        "0.90",
+        "0.04",
+        "0.2",
+        "0.8/2.5",
+        "0",
+        "0",
+    ]
     assert rows[0].split()[:5] == ["boat-2", "gone", "waiting", "-", "-"]
     assert rows[0].split()[-4:] == ["4.0", "-/-", "0", "0"]
     assert rows[2].split()[:3] == ["ghost", "alive", "-"]
@@ -101,14 +142,16 @@ def test_a_second_publisher_or_a_sequence_going_back_is_flagged_not_shown():
     real, forger = "a1b2c3d4e5f6", "ffee00112233"
     state.on_status("koopguide/boat1/status", encode_status(sample_status("boat1", seq=5)), now, real)
     # a forger claims the boat has arrived: another publisher while the real one is live
-    state.on_status("koopguide/boat1/status", encode_status(sample_status("boat1", seq=6, state="arrived")),
-                    now + 0.1, forger)
+    state.on_status(
+        "koopguide/boat1/status", encode_status(sample_status("boat1", seq=6, state="arrived")), now + 0.1, forger
+    )
     view = state.vehicles["boat1"]
     assert view.status["state"] == "guiding" and view.status["seq"] == 5
     assert view.suspect == 1 and "second publisher ffee0011" in view.last_suspect
     # a replayed (old) status from the real publisher's id: the sequence does not increase
-    state.on_status("koopguide/boat1/status", encode_status(sample_status("boat1", seq=3, state="arrived")),
-                    now + 0.2, real)
+    state.on_status(
+        "koopguide/boat1/status", encode_status(sample_status("boat1", seq=3, state="arrived")), now + 0.2, real
+    )
     assert view.suspect == 2 and "sequence went from 5 to 3" in view.last_suspect
     assert view.status["state"] == "guiding"
     table = render_table(state.vehicles, now + 0.3)
@@ -127,14 +170,24 @@ def test_a_forged_status_from_another_zenoh_peer_is_flagged_by_the_monitor():
         monitor = Monitor.open(default_zenoh_config(port))
         forger = zenoh.open(default_zenoh_config(port))
         try:
-            wait_for(lambda: monitor.poll() >= 0 and monitor.state.vehicles.get("boat1")
-                     and monitor.state.vehicles["boat1"].status is not None)
+            wait_for(
+                lambda: (
+                    monitor.poll() >= 0
+                    and monitor.state.vehicles.get("boat1")
+                    and monitor.state.vehicles["boat1"].status is not None
+                )
+            )
             for seq in range(10**6, 10**6 + 20):  # a forged "arrived", with a sequence ahead of the real one
                 forger.put("koopguide/boat1/status", encode_status(sample_status("boat1", seq=seq, state="arrived")))
                 time.sleep(0.02)
                 monitor.poll()
-            view = wait_for(lambda: monitor.poll() >= 0 and monitor.state.vehicles["boat1"].suspect >= 10
-                            and monitor.state.vehicles["boat1"])
+            view = wait_for(
+                lambda: (
+                    monitor.poll() >= 0
+                    and monitor.state.vehicles["boat1"].suspect >= 10
+                    and monitor.state.vehicles["boat1"]
+                )
+            )
             assert view.status["state"] == "guiding"  # the real publisher's state is what is shown
             assert "second publisher" in view.last_suspect
         finally:
@@ -164,8 +217,12 @@ def test_monitor_sees_status_liveliness_and_garbage(tmp_path: Path):
             assert view.alive and view.status["state"] == "guiding"
             rogue = zenoh.open(default_zenoh_config(port))
             try:
-                wait_for(lambda: rogue.put("koopguide/rogue/status", b"not a status") or (
-                    monitor.poll() >= 0 and monitor.state.malformed > 0))
+                wait_for(
+                    lambda: (
+                        rogue.put("koopguide/rogue/status", b"not a status")
+                        or (monitor.poll() >= 0 and monitor.state.malformed > 0)
+                    )
+                )
             finally:
                 rogue.close()
         wait_for(lambda: monitor.poll() >= 0 and monitor.state.vehicles["boat1"].alive is False)
@@ -217,8 +274,13 @@ def test_monitor_duration_prints_plain_blocks_and_exits_0(tmp_path: Path):
 def test_monitor_ctrl_c_exits_0(tmp_path: Path):
     port = free_port()
     with publishing("boat1", port):
-        proc = subprocess.Popen([*MONITOR, "--zenoh-config", str(config_file(tmp_path, port))], cwd=REPO,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(
+            [*MONITOR, "--zenoh-config", str(config_file(tmp_path, port))],
+            cwd=REPO,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         try:
             first_line = proc.stdout.readline()  # the first table has started
             assert first_line.startswith("koopguide monitor"), first_line + proc.stderr.read()
@@ -251,17 +313,29 @@ def test_monitor_user_errors_are_one_line(args, expected):
 def test_example_subscriber_prints_states_and_positions(tmp_path: Path):
     port = free_port()
     with publishing("boat1", port):
-        result = run([sys.executable, "examples/zenoh_subscriber.py", "--duration", "1.0",
-                      "--zenoh-config", str(config_file(tmp_path, port))])
+        result = run(
+            [
+                sys.executable,
+                "examples/zenoh_subscriber.py",
+                "--duration",
+                "1.0",
+                "--zenoh-config",
+                str(config_file(tmp_path, port)),
+            ]
+        )
     assert result.returncode == 0, result.stderr
     first = result.stdout.splitlines()[0].split()
     assert first == ["boat1", "guiding", "N", "12.50", "m", "E", "-3.25", "m"]
 
 
-
 # ------------------------------------------------------------------------ access control
-def secured(file: Path, port: int, credentials: Path, user: str | None = None, password: str | None = None,
-            ) -> zenoh.Config:
+def secured(
+    file: Path,
+    port: int,
+    credentials: Path,
+    user: str | None = None,
+    password: str | None = None,
+) -> zenoh.Config:
     """A shipped access-control template on ``port``: the router (with ``credentials``) or a client."""
     cfg = default_zenoh_config(port, file=file)
     if user is None:
@@ -285,19 +359,28 @@ def test_behind_the_access_control_router_a_peer_without_rights_cannot_publish_a
     service = zenoh.open(client("koopguide-service", "s3rvice"))
     with pytest.raises(zenoh.ZError):  # a service's name with a wrong password: the router refuses it
         zenoh.open(client("koopguide-service", "guessed")).close()
-    forgers = [zenoh.open(client("intruder", "1ntruder")),  # known to the router, but without rights
-               zenoh.open(client("koopguide-viewer", "v1ewer"))]  # a viewer trying to publish
+    forgers = [
+        zenoh.open(client("intruder", "1ntruder")),  # known to the router, but without rights
+        zenoh.open(client("koopguide-viewer", "v1ewer")),
+    ]  # a viewer trying to publish
     try:
         time.sleep(0.5)  # let the sessions connect (or fail to)
         for seq in range(1, 41):
             service.put("koopguide/boat1/status", encode_status(sample_status("boat1", seq=seq)))
             for forger in forgers:
-                forger.put("koopguide/boat1/status",
-                           encode_status(sample_status("boat1", seq=10**6 + seq, state="arrived")))
+                forger.put(
+                    "koopguide/boat1/status", encode_status(sample_status("boat1", seq=10**6 + seq, state="arrived"))
+                )
                 forger.put("koopguide/ghost/status", encode_status(sample_status("ghost", seq=seq)))
             time.sleep(0.01)
-        view = wait_for(lambda: monitor.poll() >= 0 and monitor.state.vehicles.get("boat1")
-                        and monitor.state.vehicles["boat1"].statuses == 40 and monitor.state.vehicles["boat1"])
+        view = wait_for(
+            lambda: (
+                monitor.poll() >= 0
+                and monitor.state.vehicles.get("boat1")
+                and monitor.state.vehicles["boat1"].statuses == 40
+                and monitor.state.vehicles["boat1"]
+            )
+        )
         time.sleep(0.3)
         monitor.poll()
         assert view.status["state"] == "guiding" and view.status["seq"] == 40

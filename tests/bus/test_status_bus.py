@@ -88,9 +88,18 @@ def test_round_trip_keeps_every_field_and_extras():
 
 def test_round_trip_of_the_nullable_fields_and_integer_numbers():
     status = sample_status(
-        state="waiting", mode=None, armed=None, position_ned=None, velocity_ned=None, goal_ned=None,
-        distance_to_goal_m=None, position_age_s=None, loop_latency_ms={"p50": None, "p99": None},
-        t=1_700_000_000, speed_limit_mps=2, cmd_velocity_ned=(0, 0),
+        state="waiting",
+        mode=None,
+        armed=None,
+        position_ned=None,
+        velocity_ned=None,
+        goal_ned=None,
+        distance_to_goal_m=None,
+        position_age_s=None,
+        loop_latency_ms={"p50": None, "p99": None},
+        t=1_700_000_000,
+        speed_limit_mps=2,
+        cmd_velocity_ned=(0, 0),
     )
     decoded = decode_status(encode_status(status))
     assert decoded["mode"] is None and decoded["position_ned"] is None
@@ -304,11 +313,11 @@ def test_field_and_config_queryables_answer_json():
 
     async def main() -> tuple[list, list, list]:
         async with await open_bus("boat1", port):
-
             # a get before the peers are connected finds nobody: ask until the bus answers
             deadline = time.monotonic() + 5.0
-            while not (field := [r for r in await asyncio.to_thread(_get, asker, "koopguide/boat1/field?n=4;extra=x")
-                                 if r.ok]):
+            while not (
+                field := [r for r in await asyncio.to_thread(_get, asker, "koopguide/boat1/field?n=4;extra=x") if r.ok]
+            ):
                 assert time.monotonic() < deadline, "the field queryable never answered"
                 await asyncio.sleep(0.05)
             config = await asyncio.to_thread(_get, asker, "koopguide/boat1/config")
@@ -321,7 +330,9 @@ def test_field_and_config_queryables_answer_json():
         assert str(field[0].ok.key_expr) == "koopguide/boat1/field"
         assert field[0].ok.encoding == zenoh.Encoding.APPLICATION_JSON
         assert json.loads(field[0].ok.payload.to_string()) == {
-            "n": 4, "north": [0.0, 1.0, 2.0, 3.0], "params": {"n": "4", "extra": "x"},
+            "n": 4,
+            "north": [0.0, 1.0, 2.0, 3.0],
+            "params": {"n": "4", "extra": "x"},
         }
         assert [json.loads(r.ok.payload.to_string()) for r in config] == [config_snapshot()]
         assert len(bad) == 1 and bad[0].err is not None
@@ -371,11 +382,15 @@ def test_impossible_config_gives_a_disabled_bus_and_one_warning(caplog: pytest.L
         holder.bind(("127.0.0.1", 0))
         holder.listen()
         port = holder.getsockname()[1]
-        cfg = zenoh.Config.from_json5(json.dumps({
-            "mode": "peer",
-            "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"], "exit_on_failure": True},
-            "scouting": {"multicast": {"enabled": False}},
-        }))
+        cfg = zenoh.Config.from_json5(
+            json.dumps(
+                {
+                    "mode": "peer",
+                    "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"], "exit_on_failure": True},
+                    "scouting": {"multicast": {"enabled": False}},
+                }
+            )
+        )
 
         async def main() -> StatusBus:
             bus = await StatusBus.create("boat1", cfg, field_sampler, config_snapshot)
@@ -430,6 +445,7 @@ def test_two_buses_and_a_subscriber_share_the_rendezvous_port():
         second = await open_bus("boat-2", port)  # cannot bind it: connects to it, still starts
         listener = await asyncio.to_thread(Listener, port)  # the same, a third process would do this
         try:
+
             def both_heard() -> bool:
                 first.publish(sample_status("boat1"))
                 second.publish(sample_status("boat-2", state="arrived"))

@@ -116,8 +116,16 @@ def test_along_current_accepts_up_and_downstream_within_the_angle():
     assert along_current(math.pi / 2, None, 15) and along_current(math.pi / 2, np.array([0.001, 0.0]), 15)
 
 
-@pytest.mark.parametrize(("key", "value"), [("facing_deg", 0.0), ("facing_deg", 95.0), ("approach_radius_m", 0.1),
-                                            ("capture_radius_m", -1.0), ("settle_radius_m", 0.2)])
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("facing_deg", 0.0),
+        ("facing_deg", 95.0),
+        ("approach_radius_m", 0.1),
+        ("capture_radius_m", -1.0),
+        ("settle_radius_m", 0.2),
+    ],
+)
 def test_arrival_settings_out_of_range_are_refused(key, value):
     from koopguide.base.config import ConfigError
 

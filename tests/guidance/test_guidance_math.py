@@ -47,8 +47,11 @@ def law_for(model: Path, **overrides) -> GuidanceLaw:
 
 
 def test_paper_speed_rule_maps_the_domain_maximum_to_max_speed_and_never_exceeds_it(zshape_model):
-    law = law_for(zshape_model, command={"max_speed_mps": 0.3, "min_speed_mps": 0.0, "turn_slowdown": False,
-                                         "lookahead_m": 0.0}, arrival={"capture_radius_m": 0.0})
+    law = law_for(
+        zshape_model,
+        command={"max_speed_mps": 0.3, "min_speed_mps": 0.0, "turn_slowdown": False, "lookahead_m": 0.0},
+        arrival={"capture_radius_m": 0.0},
+    )
     grid = law.sample_grid(64)
     speeds = np.hypot(*np.asarray(grid["velocity_ned"]).T)
     assert speeds.max() == pytest.approx(0.3, rel=0.02)
@@ -80,8 +83,9 @@ def test_arrival_outside_domain_geofence_and_turn_slowdown(zshape_model):
 def test_a_nan_field_is_a_fault_with_zero_velocity(zshape_model):
     law = law_for(zshape_model)
     good = law.field
-    law.field = FlowField(good.W, good.b, np.full_like(good.A, np.nan), good.B, good.goal, good.goal_centred,
-                          good.substeps, good.meta)
+    law.field = FlowField(
+        good.W, good.b, np.full_like(good.A, np.nan), good.B, good.goal, good.goal_centred, good.substeps, good.meta
+    )
     sp = law.decide([1.0, -1.0], arrived=False)
     assert sp.state is GuidanceState.FAULT and not sp.velocity_ned.any()
 
@@ -120,16 +124,19 @@ def test_vehicle_clock_follows_a_speeded_up_vehicle_and_restarts_on_reboot():
     assert clock.reboots == 1 and clock.now() == pytest.approx(1.1)
 
 
-@pytest.mark.parametrize(("overrides", "expected"), [
-    ({"command": {"rate_hz": 80.0}}, "command.rate_hz"),
-    ({"command": {"max_speed_mps": -1.0}}, "command.max_speed_mps"),
-    ({"frame": {"scale": 0}}, "frame.scale"),
-    ({"vehicle_id": "boat/1"}, "vehicle_id"),
-    ({"arrival": {"on_arrival": "dance"}}, "arrival.on_arrival"),
-    ({"failsafe": {"geofence_ned": [[1.0, 0.0], [0.0, 1.0]]}}, "failsafe.geofence_ned"),
-    ({"mavlink": {"target_system": 0}}, "mavlink.target_system"),
-    ({"status": {"bogus": 1}}, "status.bogus"),
-])
+@pytest.mark.parametrize(
+    ("overrides", "expected"),
+    [
+        ({"command": {"rate_hz": 80.0}}, "command.rate_hz"),
+        ({"command": {"max_speed_mps": -1.0}}, "command.max_speed_mps"),
+        ({"frame": {"scale": 0}}, "frame.scale"),
+        ({"vehicle_id": "boat/1"}, "vehicle_id"),
+        ({"arrival": {"on_arrival": "dance"}}, "arrival.on_arrival"),
+        ({"failsafe": {"geofence_ned": [[1.0, 0.0], [0.0, 1.0]]}}, "failsafe.geofence_ned"),
+        ({"mavlink": {"target_system": 0}}, "mavlink.target_system"),
+        ({"status": {"bogus": 1}}, "status.bogus"),
+    ],
+)
 def test_config_errors_name_the_key(overrides, expected):
     with pytest.raises(ConfigError, match=expected.replace(".", r"\.")):
         settings.load(overrides=overrides)

@@ -41,8 +41,9 @@ def test_the_service_refuses_an_uncertified_model_before_opening_anything(uncert
 
 
 def test_allow_uncertified_lets_it_run_with_a_warning(uncertified_model: Path, caplog: pytest.LogCaptureFixture):
-    cfg = settings.load(overrides={"allow_uncertified": True,
-                                   "mavlink": {"endpoint": f"udp:127.0.0.1:{free_udp_port()}"}})
+    cfg = settings.load(
+        overrides={"allow_uncertified": True, "mavlink": {"endpoint": f"udp:127.0.0.1:{free_udp_port()}"}}
+    )
 
     async def open_and_close() -> None:
         daemon = await GuidanceDaemon.create(cfg, uncertified_model)
@@ -54,8 +55,21 @@ def test_allow_uncertified_lets_it_run_with_a_warning(uncertified_model: Path, c
 
 def test_koopguide_run_exits_2_with_one_line_on_an_uncertified_model(uncertified_model: Path):
     result = subprocess.run(
-        [sys.executable, "-m", "koopguide", "run", "--model", str(uncertified_model), "--mavlink",
-         f"udp:127.0.0.1:{free_udp_port()}"], capture_output=True, text=True, timeout=60, check=False)
+        [
+            sys.executable,
+            "-m",
+            "koopguide",
+            "run",
+            "--model",
+            str(uncertified_model),
+            "--mavlink",
+            f"udp:127.0.0.1:{free_udp_port()}",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "convergence certificate" in lines[0], result.stderr

@@ -216,8 +216,12 @@ def test_a_lost_tcp_link_is_reopened_with_back_off(zshape_model: Path) -> None:
 
     port = free_udp_port()
     sim_cfg = sitl_config.load(
-        overrides={"speedup": 5.0, "start_poses": [[1.5, -1.5, 90.0]], "world": {"walls": False},
-                   "mavlink": {"endpoints": [f"tcpin:127.0.0.1:{port}"]}}
+        overrides={
+            "speedup": 5.0,
+            "start_poses": [[1.5, -1.5, 90.0]],
+            "world": {"walls": False},
+            "mavlink": {"endpoints": [f"tcpin:127.0.0.1:{port}"]},
+        }
     )
     cfg = config(port, mavlink={"endpoint": f"tcp:127.0.0.1:{port}", "reconnect_min_s": 0.2, "reconnect_max_s": 1.0})
 
@@ -233,8 +237,14 @@ def test_a_lost_tcp_link_is_reopened_with_back_off(zshape_model: Path) -> None:
             assert not task.done() and not daemon.link.connected
             with SimulationThread(sim_cfg):
                 await until(lambda: daemon.link.stats.reconnects >= 1, 10.0)
-                await until(lambda: daemon.supervisor.link_up(time.monotonic()) and daemon.position_age() is not None
-                            and daemon.position_age() < 0.5, 10.0)
+                await until(
+                    lambda: (
+                        daemon.supervisor.link_up(time.monotonic())
+                        and daemon.position_age() is not None
+                        and daemon.position_age() < 0.5
+                    ),
+                    10.0,
+                )
         finally:
             if daemon is not None:
                 daemon.stop()

@@ -29,10 +29,15 @@ ARRIVE_M = 0.15
 def fly(model: Path, start: int, flow: dict | None, zenoh_port: int | None = None, timeout_s: float = 120.0):
     cfg, sim_cfg, pose = mission.demo_mission(model, start, 0.0, SPEEDUP)
     if flow is not None:
-        sim_cfg = sitl_config.load(overrides=mission.sim_overrides(
-            pose, int(cfg.mavlink.endpoint.rsplit(":", 1)[1]), {"north_m": list(sim_cfg.world.north_m),
-                                                               "east_m": list(sim_cfg.world.east_m)},
-            SPEEDUP, flow))
+        sim_cfg = sitl_config.load(
+            overrides=mission.sim_overrides(
+                pose,
+                int(cfg.mavlink.endpoint.rsplit(":", 1)[1]),
+                {"north_m": list(sim_cfg.world.north_m), "east_m": list(sim_cfg.world.east_m)},
+                SPEEDUP,
+                flow,
+            )
+        )
     zenoh_config = default_zenoh_config(zenoh_port) if zenoh_port else None
     return cfg, asyncio.run(mission.fly(cfg, model, sim_cfg, timeout_s, settle_s=20.0, zenoh_config=zenoh_config))
 
@@ -47,8 +52,7 @@ def current(direction_deg: float) -> dict:
     return {"kinds": ["uniform"], "uniform": {"speed_mps": 0.03, "direction_deg": direction_deg}}
 
 
-GYRE = {"kinds": ["double_gyre"], "double_gyre": {"origin_ned_m": [-1.0, -2.5], "scale_m": 1.5,
-                                                   "amplitude_mps": 0.02}}
+GYRE = {"kinds": ["double_gyre"], "double_gyre": {"origin_ned_m": [-1.0, -2.5], "scale_m": 1.5, "amplitude_mps": 0.02}}
 
 
 @pytest.mark.timeout(120)
@@ -99,10 +103,13 @@ def test_done_when_mission_reaches_the_goal_in_a_cross_current_with_zenoh_status
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize(("start", "flow"), [(0, current(0.0)), (1, current(0.0)), (2, GYRE), (4, current(180.0)),
-                                             (5, current(270.0)), (6, current(90.0))])
-def test_missions_from_demo_starts_arrive_in_currents_and_keep_station(zshape_model: Path, start: int,
-                                                                        flow: dict) -> None:
+@pytest.mark.parametrize(
+    ("start", "flow"),
+    [(0, current(0.0)), (1, current(0.0)), (2, GYRE), (4, current(180.0)), (5, current(270.0)), (6, current(90.0))],
+)
+def test_missions_from_demo_starts_arrive_in_currents_and_keep_station(
+    zshape_model: Path, start: int, flow: dict
+) -> None:
     cfg, result = fly(zshape_model, start, flow)
     assert result.arrived, f"final distance {result.final_distance_m:.2f} m"
     assert result.arrival_time_s <= 75.0, result.arrival_time_s

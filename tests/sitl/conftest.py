@@ -16,9 +16,7 @@ def gcs_and_sim() -> Iterator[Callable[..., tuple[Gcs, SimulationThread]]]:
     """Factory: (gcs, simulator) with the simulator sending udpout to the GCS's bound loopback port."""
     opened: list[tuple[Any, SimulationThread]] = []
 
-    def start(
-        overrides: dict[str, Any] | None = None, records: list | None = None
-    ) -> tuple[Gcs, SimulationThread]:
+    def start(overrides: dict[str, Any] | None = None, records: list | None = None) -> tuple[Gcs, SimulationThread]:
         conn = mavutil.mavlink_connection(
             "udpin:127.0.0.1:0",
             source_system=GCS_SYSTEM,
@@ -26,9 +24,7 @@ def gcs_and_sim() -> Iterator[Callable[..., tuple[Gcs, SimulationThread]]]:
             dialect="ardupilotmega",
         )
         port = conn.port.getsockname()[1]
-        cfg = sim_config(
-            sitl_config_merge({"mavlink": {"endpoints": [f"udpout:127.0.0.1:{port}"]}}, overrides or {})
-        )
+        cfg = sim_config(sitl_config_merge({"mavlink": {"endpoints": [f"udpout:127.0.0.1:{port}"]}}, overrides or {}))
         sim = SimulationThread(cfg, records)
         sim.__enter__()
         opened.append((conn, sim))

@@ -25,8 +25,6 @@ from tests.support.config_paths import leaf_paths, nested
 SITL_DEFAULTS = config.load_yaml(config.default_config_path("sitl"))
 
 
-
-
 def load_text(tmp_path: Path, text: str) -> SitlConfig:
     user = tmp_path / "user.yaml"
     user.write_text(text)

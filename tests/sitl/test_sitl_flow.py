@@ -43,9 +43,7 @@ def test_double_gyre_without_dissipation_is_divergence_free(t):
 
 def test_double_gyre_dissipation_adds_minus_two_mu_divergence():
     cfg = gyre(mu=0.05)
-    assert divergence(lambda n, e: double_gyre_velocity(n, e, 3.0, cfg), 0.7, 0.4) == pytest.approx(
-        -0.1, abs=1e-7
-    )
+    assert divergence(lambda n, e: double_gyre_velocity(n, e, 3.0, cfg), 0.7, 0.4) == pytest.approx(-0.1, abs=1e-7)
 
 
 def test_double_gyre_walls_are_streamlines():

@@ -15,9 +15,7 @@ from sitl.autopilot import (
     interpret_position_target,
 )
 
-NAV = Navigation(
-    t=0.0, n=1.0, e=2.0, vn=0.0, ve=0.0, psi=math.pi / 2, r=0.0, position_ok=True
-)  # heading east
+NAV = Navigation(t=0.0, n=1.0, e=2.0, vn=0.0, ve=0.0, psi=math.pi / 2, r=0.0, position_ok=True)  # heading east
 CAP = 0.4
 
 
@@ -37,18 +35,12 @@ def test_speed_is_capped_at_wp_speed():
 
 def test_velocity_and_yaw():
     t = target(2535, vel=(0.2, 0.0), yaw=1.0)
-    assert t == GuidedTarget(
-        TargetKind.HEADING_SPEED, speed_mps=pytest.approx(0.2), heading_rad=pytest.approx(1.0)
-    )
+    assert t == GuidedTarget(TargetKind.HEADING_SPEED, speed_mps=pytest.approx(0.2), heading_rad=pytest.approx(1.0))
 
 
 def test_velocity_and_yaw_rate():
     t = target(1511, vel=(0.1, 0.0), yaw_rate=0.2)
-    assert (
-        t.kind == TargetKind.TURN_RATE_SPEED
-        and t.turn_rate_radps == 0.2
-        and t.speed_mps == pytest.approx(0.1)
-    )
+    assert t.kind == TargetKind.TURN_RATE_SPEED and t.turn_rate_radps == 0.2 and t.speed_mps == pytest.approx(0.1)
 
 
 def test_body_frame_velocity_is_rotated_by_the_heading():

@@ -63,9 +63,7 @@ def test_stream_rate_requests_change_rates_on_the_link(gcs_and_sim):
     ack = gcs.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 50_000)
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED
     stamps = []
-    gcs.run_for(
-        2.0, lambda m: stamps.append(m.time_boot_ms) if m.get_type() == "LOCAL_POSITION_NED" else None
-    )
+    gcs.run_for(2.0, lambda m: stamps.append(m.time_boot_ms) if m.get_type() == "LOCAL_POSITION_NED" else None)
     assert 35 <= len(stamps) <= 45  # 20 Hz for 2 s simulated
     gcs.mav.request_data_stream_send(1, 1, mavlink.MAV_DATA_STREAM_EXTRA1, 10, 1)
     count = []
@@ -87,11 +85,7 @@ def test_requested_messages_and_parameters(gcs_and_sim):
     gcs.mav.param_request_list_send(1, 1)
     params = {}
     gcs.wait(
-        lambda m: (
-            m.get_type() == "PARAM_VALUE"
-            and params.setdefault(m.param_id, m)
-            and len(params) == m.param_count
-        ),
+        lambda m: m.get_type() == "PARAM_VALUE" and params.setdefault(m.param_id, m) and len(params) == m.param_count,
         "all PARAM_VALUEs",
     )
     assert params["GUID_TIMEOUT"].param_value == 3.0
@@ -151,24 +145,18 @@ def test_guided_session_tracks_north_times_out_and_disarms(gcs_and_sim):
 
     # acceleration bits: ignored, with a STATUSTEXT; the boat keeps its last valid target
     gcs.velocity(0.0, 0.3, mask=VELOCITY_MASK & ~0x40)  # AX used
-    gcs.wait(
-        lambda m: m.get_type() == "STATUSTEXT" and "acceleration" in m.text, "acceleration STATUSTEXT", 3.0
-    )
+    gcs.wait(lambda m: m.get_type() == "STATUSTEXT" and "acceleration" in m.text, "acceleration STATUSTEXT", 3.0)
     pos = gcs.wait_type("LOCAL_POSITION_NED")
     assert pos.vx > 0.24 and abs(pos.vy) < 0.06
 
     # stop sending: ArduPilot's guided timeout, STATUSTEXT, and the boat stops within 3 s of it
     last_setpoint = last_sent[0]  # the last valid setpoint (the accelerated one did not count)
-    text = gcs.wait(
-        lambda m: m.get_type() == "STATUSTEXT" and "target not received" in m.text, "timeout text", 6.0
-    )
+    text = gcs.wait(lambda m: m.get_type() == "STATUSTEXT" and "target not received" in m.text, "timeout text", 6.0)
     assert text.text == "target not received last 3.0 secs, stopping"
     t_timeout = gcs.t
     assert 2.8 <= t_timeout - last_setpoint <= 3.8, (last_setpoint, t_timeout)
     after = []
-    gcs.run_for(
-        6.0, lambda m: after.append((gcs.t - t_timeout, m)) if m.get_type() == "LOCAL_POSITION_NED" else None
-    )
+    gcs.run_for(6.0, lambda m: after.append((gcs.t - t_timeout, m)) if m.get_type() == "LOCAL_POSITION_NED" else None)
     stopped = [math.hypot(m.vx, m.vy) for dt, m in after if dt >= 3.0]
     assert max(stopped) < 0.05, stopped
     assert gcs.heartbeat.custom_mode == GUIDED  # a boat holds position in GUIDED
@@ -225,9 +213,7 @@ def test_loiter_holds_against_a_current_while_hold_drifts(gcs_and_sim):
     gcs.run_for(
         20.0,
         lambda m: (
-            offsets.append(math.hypot(m.x - start.x, m.y - start.y))
-            if m.get_type() == "LOCAL_POSITION_NED"
-            else None
+            offsets.append(math.hypot(m.x - start.x, m.y - start.y)) if m.get_type() == "LOCAL_POSITION_NED" else None
         ),
     )
     assert max(offsets) < 0.3, f"LOITER wandered {max(offsets):.2f} m"
@@ -278,9 +264,7 @@ def test_garbage_bytes_are_dropped_and_counted(gcs_and_sim):
     bad_crc[-1] ^= 0xFF
     sock.sendto(bytes(bad_crc), addr)
     rng = random.Random(7)  # corrupted copies of real frames: flipped bytes, truncations
-    frame = gcs.mav.command_long_encode(1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 1, HOLD, 0, 0, 0, 0, 0).pack(
-        gcs.mav
-    )
+    frame = gcs.mav.command_long_encode(1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 1, HOLD, 0, 0, 0, 0, 0).pack(gcs.mav)
     for k in range(500):
         if k % 50 == 0:
             gcs.run_for(0.2)  # bursts, so the socket buffer never overflows (that would drop frames)
@@ -313,9 +297,7 @@ def test_global_int_setpoints_and_command_int(gcs_and_sim):
     gcs, _ = gcs_and_sim(SOUTH_END, records)
     gcs.mav.request_data_stream_send(1, 1, mavlink.MAV_DATA_STREAM_POSITION, 10, 1)
     mode = mavlink.MAV_CMD_DO_SET_MODE
-    gcs.mav.command_int_send(
-        1, 1, 0, mode, 0, 0, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED, 0, 0, 0, 0, 0
-    )
+    gcs.mav.command_int_send(1, 1, 0, mode, 0, 0, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED, 0, 0, 0, 0, 0)
     ack = gcs.wait(lambda m: m.get_type() == "COMMAND_ACK" and m.command == mode, "COMMAND_INT ack")
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED
     gcs.arm()

@@ -109,9 +109,7 @@ class Gcs:
     def arm(self, arm: bool = True) -> Any:
         return self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if arm else 0.0)
 
-    def velocity(
-        self, vn: float, ve: float, mask: int = VELOCITY_MASK, frame: int = 1, yaw: float = 0.0
-    ) -> None:
+    def velocity(self, vn: float, ve: float, mask: int = VELOCITY_MASK, frame: int = 1, yaw: float = 0.0) -> None:
         self.mav.set_position_target_local_ned_send(
             round(self.t * 1000), self.target_system, 1, frame, mask, 0, 0, 0, vn, ve, 0, 0, 0, 0, yaw, 0
         )

@@ -55,8 +55,13 @@ def save(path: Path, trained: trainer.TrainedField, demos: data.Demonstrations, 
     modelfile.write(path, weights, meta)
 
 
-def train_to_file(demos: data.Demonstrations, path: Path, seed: int = 0, cfg: trainer.TrainConfig | None = None,
-                  progress: Callable[[int, int, dict[str, float]], None] | None = None) -> trainer.TrainedField:
+def train_to_file(
+    demos: data.Demonstrations,
+    path: Path,
+    seed: int = 0,
+    cfg: trainer.TrainConfig | None = None,
+    progress: Callable[[int, int, dict[str, float]], None] | None = None,
+) -> trainer.TrainedField:
     """Train on ``demos`` (default settings unless ``cfg``) and write the model to ``path``."""
     cfg = training_config(None) if cfg is None else cfg
     trained = trainer.train(demos, cfg, seed, progress=progress)

@@ -55,7 +55,6 @@ def divergence_loss(model: FourierKoopman, x: torch.Tensor, of: DivergenceOf) ->
     return torch.mean(trace**2)
 
 
-
 def multistep_loss(model: FourierKoopman, windows: torch.Tensor) -> torch.Tensor:
     """Long-horizon linearity ``sum_h |Psi(x_h) - K^h Psi(x_0)|^2 / H`` over windows ``(M, H + 1, d)``.
 

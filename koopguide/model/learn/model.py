@@ -21,8 +21,9 @@ class FourierKoopman(nn.Module):
     point of the re-lifted map ``f(x) = g + [K Phi(x)]_{1:d}``.
     """
 
-    def __init__(self, dim: int, nu: int, rank: int, goal: torch.Tensor, goal_centred: bool,
-                 generator: torch.Generator) -> None:
+    def __init__(
+        self, dim: int, nu: int, rank: int, goal: torch.Tensor, goal_centred: bool, generator: torch.Generator
+    ) -> None:
         super().__init__()
         self.dim, self.nu, self.rank = dim, nu, rank
         self.goal_centred = goal_centred
