@@ -36,6 +36,10 @@ ZERO = (0.0, 0.0)
 S = GuidanceState
 
 
+Velocity = tuple[float, float]  # (vN, vE) [m/s]
+Requests = list[ev.Request] | tuple[ev.Request, ...]
+
+
 class Supervisor:
     """Feed events with :meth:`handle`; a ``Tick`` returns the decision. Read ``take_notes()`` to log."""
 
@@ -341,15 +345,7 @@ class Supervisor:
         self.degraded = False
 
     # ------------------------------------------------------------------------------ output
-    def _out(
-        self,
-        v: tuple[float, float],
-        state: S,
-        reason: str,
-        send: bool,
-        t: float,
-        requests: list[ev.Request] | tuple[ev.Request, ...] = (),
-    ) -> ev.Decision:
+    def _out(self, v: Velocity, state: S, reason: str, send: bool, t: float, requests: Requests = ()) -> ev.Decision:
         if self.output_fault and state in (S.GUIDING, S.ARRIVED):
             state, reason = S.FAULT, f"setpoints are not going out ({self.reason})"
         self.separation_active = False
