@@ -17,6 +17,7 @@ from typing import Any
 
 from koopguide.base.entry import run_entry
 from koopguide.base.flags import Flag, add_flags, name_list, overrides_from
+from koopguide.mavlink.signing import SIGNING_KEY_FLAG
 from sitl import config as sitl_config
 from sitl.config import SitlConfig
 from sitl.runner import Simulation
@@ -46,13 +47,7 @@ SITL_FLAGS: tuple[Flag, ...] = (
         metavar="ENDPOINT",
         repeat=True,
     ),
-    Flag(
-        "--signing-key",
-        "mavlink.signing_key",
-        str,
-        "MAVLink 2 signing key: 32 raw bytes or 64 hex characters (docs/mavlink.md)",
-        metavar="FILE",
-    ),
+    SIGNING_KEY_FLAG,
     Flag("--speedup", "speedup", speedup_value, "simulated s per wall s, or 'max'", metavar="X"),
     Flag(
         "--flow",

@@ -40,7 +40,7 @@ def add_flags(parser: argparse.ArgumentParser, flags: Sequence[Flag]) -> None:
                 f.flag,
                 dest=f.dest,
                 type=f.parse,
-                metavar=f.metavar,
+                metavar=f.metavar or f.flag.lstrip("-").upper().replace("-", "_"),
                 help=f.help,
                 action="append" if f.repeat else "store",
             )

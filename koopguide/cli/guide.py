@@ -15,6 +15,7 @@ from typing import Any
 
 from koopguide.base.config import ConfigError
 from koopguide.base.flags import Flag, add_flags, number_pair, overrides_from
+from koopguide.mavlink.signing import SIGNING_KEY_FLAG
 
 #: Flags of ``koopguide run`` that set keys of config/guidance.yaml.
 GUIDANCE_FLAGS: tuple[Flag, ...] = (
@@ -25,13 +26,7 @@ GUIDANCE_FLAGS: tuple[Flag, ...] = (
         "udp:HOST:PORT (listen), udpout:, tcp:, tcpin: or DEVICE,BAUD",
         metavar="ENDPOINT",
     ),
-    Flag(
-        "--signing-key",
-        "mavlink.signing_key",
-        str,
-        "MAVLink 2 signing key: 32 raw bytes or 64 hex characters (docs/mavlink.md)",
-        metavar="FILE",
-    ),
+    SIGNING_KEY_FLAG,
     Flag("--vehicle-id", "vehicle_id", str, "name on zenoh: koopguide/<id>/status"),
     Flag("--goal-ned", "frame.goal_ned", number_pair, "where the model's goal lands in local NED [m]", metavar="N,E"),
     Flag("--goal-latlon", "frame.goal_latlon", number_pair, "a geodetic goal instead [deg]", metavar="LAT,LON"),

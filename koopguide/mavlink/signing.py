@@ -32,6 +32,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from koopguide.base.flags import Flag
+
 log = logging.getLogger(__name__)
 
 KEY_BYTES = 32
@@ -43,6 +45,15 @@ CRC_BYTES = 2
 EPOCH_2015_UNIX_S = 1420070400  # 2015-01-01 00:00:00 UTC
 TICKS_PER_S = 100_000  # signing timestamps count 10 us ticks
 NEW_STREAM_MAX_AGE_TICKS = 60 * TICKS_PER_S  # a new stream may start at most one minute behind our clock
+
+#: ``--signing-key FILE`` of ``koopguide run`` and ``koopguide sitl``: sets ``mavlink.signing_key`` of either config.
+SIGNING_KEY_FLAG = Flag(
+    "--signing-key",
+    "mavlink.signing_key",
+    str,
+    "MAVLink 2 signing key: 32 raw bytes or 64 hex characters (docs/mavlink.md)",
+    metavar="FILE",
+)
 
 
 class SigningKeyError(ValueError):
