@@ -20,9 +20,11 @@ from __future__ import annotations
 import hashlib
 import math
 from dataclasses import asdict, dataclass
+from typing import Annotated
 
 import numpy as np
 
+from koopguide.base.config import Range, check
 from koopguide.model.field import FlowField
 
 CERTIFICATE_VERSION = 1
@@ -223,16 +225,38 @@ def summary_lines(cert: dict) -> list[str]:
 class FunnelSettings:
     """How the Lyapunov limit is built and certified (``limit`` and ``certificate`` in train.yaml)."""
 
-    outside: float  # ratio |f~(x) - g| / |x - g| allowed away from the demonstrations (< 1)
-    tube_width: float  # fraction of the demonstrations' box diagonal: where the fit is left alone
-    margin: float  # relative and absolute slack over the learned field's own ratio on the demos
-    table_nodes: int  # total nodes of the ratio table (per axis: its d-th root)
-    table_enlarge: float  # the table covers the demos' box, each side moved out by this fraction
-    grid: int  # certificate starts per axis in 2-D; in d dimensions ceil(grid^(2/d)) per axis (>= grid^2 starts)
-    enlarge: float  # certificate box: the demos' box, each side moved out by this fraction
-    tolerance: float  # model units: a start converges if it ends this close to the goal
-    learned_steps: int  # horizon of the learned-step integrator (x 'substeps' raw Euler steps)
-    repairs: int  # carve-and-recertify rounds before falling back to global contraction
+    outside: Annotated[
+        float, Range(0.0, 1.0, lo_open=True, hi_open=True)
+    ]  # ratio |f~(x) - g| / |x - g| allowed away from the demonstrations (< 1)
+    tube_width: Annotated[
+        float, Range(0.0, 1.0)
+    ]  # fraction of the demonstrations' box diagonal: where the fit is left alone
+    margin: Annotated[
+        float, Range(0.0, 1.0)
+    ]  # relative and absolute slack over the learned field's own ratio on the demos
+    table_nodes: Annotated[int, Range(16, 1 << 20)]  # total nodes of the ratio table (per axis: its d-th root)
+    table_enlarge: Annotated[
+        float, Range(0.0, 2.0)
+    ]  # the table covers the demos' box, each side moved out by this fraction
+    grid: Annotated[
+        int, Range(100, 2000)
+    ]  # certificate starts per axis in 2-D; in d dimensions ceil(grid^(2/d)) per axis (>= grid^2 starts)
+    enlarge: Annotated[float, Range(0.0, 2.0)]  # certificate box: the demos' box, each side moved out by this fraction
+    tolerance: Annotated[
+        float, Range(0.0, 1e9, lo_open=True, hi_open=True)
+    ]  # model units: a start converges if it ends this close to the goal
+    learned_steps: Annotated[
+        int, Range(1, 100000)
+    ]  # horizon of the learned-step integrator (x 'substeps' raw Euler steps)
+    repairs: Annotated[int, Range(0, 20)]  # carve-and-recertify rounds before falling back to global contraction
+
+    def __post_init__(self) -> None:
+        check(
+            self.enlarge <= self.table_enlarge,
+            "convergence.enlarge",
+            self.enlarge,
+            f"<= table_enlarge ({self.table_enlarge})",
+        )
 
 
 def enlarged_box(bounds: tuple[np.ndarray, np.ndarray], per_side: float) -> tuple[np.ndarray, np.ndarray]:

@@ -51,7 +51,11 @@ def test_absurd_numbers_are_one_line_errors_naming_the_key(tmp_path: Path, text:
 
 
 def test_every_numeric_key_declares_its_range():
-    assert config.numeric_without_range(guidance_settings.GuidanceConfig) == []
+    from koopguide.model.learn.trainer import TrainConfig
+    from sitl.config import SitlConfig
+
+    for cls in (guidance_settings.GuidanceConfig, TrainConfig, SitlConfig):
+        assert config.numeric_without_range(cls) == [], cls.__name__
 
 
 def test_a_range_is_closed_or_open_as_declared():

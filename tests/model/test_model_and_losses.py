@@ -99,17 +99,24 @@ def test_training_is_deterministic_for_a_seed_and_differs_across_seeds(zshape):
     assert not np.array_equal(a.A, c.A)
 
 
-def test_invalid_training_settings_are_refused_with_the_values():
+def test_invalid_training_settings_are_refused_at_load_with_the_values():
+    from koopguide.base.config import ConfigError
     from tests.support.models import small_config
 
-    with pytest.raises(ValueError, match=r"max_spectral_radius must be in \(0, 1\), got 1.5"):
-        trainer.train(None, small_config(stability={"max_spectral_radius": 1.5}), seed=0)
-    with pytest.raises(ValueError, match=r"optim.lr must be > 0, got -1.0"):
-        trainer.train(None, small_config(optim={"lr": -1.0}), seed=0)
-    with pytest.raises(ValueError, match=r"convergence.grid must be in \[100, 2000\], got 50"):
-        trainer.train(None, small_config(convergence={"grid": 50}), seed=0)
-    with pytest.raises(ValueError, match=r"convergence.outside must be in \(0.0, 1.0\), got 1.0"):
-        trainer.train(None, small_config(convergence={"outside": 1.0}), seed=0)
+    with pytest.raises(
+        ConfigError, match=r"stability.max_spectral_radius: 1.5 is out of range \(expected a number in \(0, 1\)\)"
+    ):
+        small_config(stability={"max_spectral_radius": 1.5})
+    with pytest.raises(ConfigError, match=r"optim.lr: -1.0 is out of range \(expected a number in \(0, 10\]\)"):
+        small_config(optim={"lr": -1.0})
+    with pytest.raises(
+        ConfigError, match=r"convergence.grid: 50 is out of range \(expected a number in \[100, 2000\]\)"
+    ):
+        small_config(convergence={"grid": 50})
+    with pytest.raises(
+        ConfigError, match=r"convergence.outside: 1.0 is out of range \(expected a number in \(0, 1\)\)"
+    ):
+        small_config(convergence={"outside": 1.0})
 
 
 def test_xavier_bounds_as_reference():
