@@ -133,6 +133,7 @@ class GuidanceDaemon:
                 )
             log.warning("UNCERTIFIED MODEL %s: %s; guiding anyway (allow_uncertified)", model_path, why)
         law = GuidanceLaw.from_config(field, cfg)
+        await asyncio.to_thread(lambda: law.along_table)  # built before the loop runs (the progress watchdog's)
         token_file = cfg.status.control_token_file
         daemon = cls(cfg, Path(model_path), law, None if token_file is None else load_token(token_file))
         log.info(

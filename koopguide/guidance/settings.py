@@ -82,6 +82,7 @@ class CommandSettings:
     rate_hz: Rate
     max_speed_mps: Annotated[float, Range(0.0, 20.0, lo_open=True)]
     min_speed_mps: Speed
+    turn_speed_mps: Speed  # a boat that needs way to turn (a rudder boat) keeps at least this while turning
     turn_slowdown: bool
     current_compensation: bool
     lookahead_m: Distance

@@ -23,7 +23,8 @@ import numpy as np
 
 from koopguide.guidance import events as ev
 from koopguide.guidance.estimation.progress import ProgressWatchdog
-from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceLaw, GuidanceState, along_current
+from koopguide.guidance.helm import Helm
+from koopguide.guidance.law.command import GuidanceLaw, GuidanceState, along_current
 from koopguide.guidance.law.station import StationKeeper
 from koopguide.guidance.neighbours import Neighbours
 from koopguide.guidance.requests import RequestSchedule
@@ -31,6 +32,7 @@ from koopguide.guidance.settings import ArrivalAction, GuidanceConfig
 from koopguide.guidance.vehicle_state import VehicleState
 from koopguide.mavlink import rover
 
+HONEST_LEAD_S = 0.25  # leave arrived on where the boat will be this much later [s] (the fix's age, and more)
 OUTPUT_GAP_PERIODS = 2.0  # no setpoint for this many command periods while guiding/arrived: fault
 ZERO = (0.0, 0.0)
 S = GuidanceState
@@ -47,15 +49,9 @@ class Supervisor:
         self.cfg, self.law = cfg, law
         self.period = 1.0 / cfg.command.rate_hz  # vehicle seconds between setpoints
         self.vehicle = VehicleState(cfg)  # checked estimates: position, velocity, heading, current
-        a = cfg.arrival
-        self.station = StationKeeper(
-            a.station_gain,
-            a.integral_gain_per_s2,
-            a.integral_limit_mps,
-            cfg.command.max_speed_mps,
-            deadband_m=a.radius_m,
-        )
+        self.station = StationKeeper.from_config(cfg)  # PI feedback onto the goal (station keeping, pursuit)
         self.progress = ProgressWatchdog(cfg.failsafe.stall_s, cfg.failsafe.stall_progress_m)
+        self.helm = Helm(cfg, law)  # wanted ground velocity -> setpoint for this boat (how it turns is learned)
         self.heartbeat_wall: float | None = None  # the vehicle's last heartbeat (service clock) [s]
         self.mode: int | None = None
         self.armed: bool | None = None
@@ -131,7 +127,8 @@ class Supervisor:
             return False
         self._place_geodetic_goal()
         if self.arrived:  # status honesty: leave arrived on the fix that shows the drift, not a tick later
-            self.reacquire_if_drifted(self.law.distance_to_goal(self.vehicle.tracker.predict(fix.t_s)[0]), fix.t_s)
+            ahead = self.vehicle.tracker.predict(fix.t_s + HONEST_LEAD_S)[0]  # a fix is already old when it arrives
+            self.reacquire_if_drifted(self.law.distance_to_goal(ahead), fix.t_s)
         return True
 
     def update_current(self, t: float) -> None:
@@ -246,65 +243,58 @@ class Supervisor:
         return self._out(ZERO, S.ARRIVED, f"arrived; {rover.mode_name(keep)} holds the boat", in_guided, now, requests)
 
     def _guide(self, now: float, wall: float, requests: list[ev.Request]) -> ev.Decision:
-        cfg, law = self.cfg, self.law
-        p, _ = self.vehicle.tracker.predict(now + cfg.command.lead_s)
+        cfg, law, arrival = self.cfg, self.law, self.cfg.arrival
+        p, v_est = self.vehicle.tracker.predict(now + cfg.command.lead_s)
         heading = self.vehicle.heading_at(now)
         estimator = self.vehicle.current
         current = estimator.current_ned if heading is not None and estimator.updates else None
+        rate = self.vehicle.attitude[2] if heading is not None and self.vehicle.attitude else None
+        self.helm.observe(now, heading, rate, v_est, current)
         distance = law.distance_to_goal(p)
         if self.arrived:
             self.reacquire_if_drifted(distance, now)
-        elif distance <= cfg.arrival.radius_m:
+        elif distance <= arrival.radius_m:
             self.arrived, self.degraded, self.back_reason = True, False, ""
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
             self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s")
         error = law.goal_ned - p
         # After a drift-off, within the capture radius: back onto the goal with the station keeping control
         # (honestly reported as guiding), not the approach's speed floor that would overshoot the goal.
-        drifted_near = bool(self.back_reason) and distance <= cfg.arrival.capture_radius_m and not self.degraded
+        drifted_near = bool(self.back_reason) and distance <= arrival.capture_radius_m and not self.degraded
+        state = S.GUIDING
         if self.arrived or drifted_near:
             wanted = self.station.update(now, error, law.station_velocity(p, current))  # P (capped) + I
-            v = law.steer(wanted, heading, current, CRAB_MIN_SPEED_MPS)
+            v, yaw = self.helm.near(p, wanted, heading, current, distance)
+            if drifted_near and self.progress.update(now, p, wanted, distance):
+                return self._start_pursuit(now, wall, distance, requests)
             if drifted_near:
-                if self.progress.update(now, p, wanted, distance):
-                    return self._start_pursuit(now, wall, distance, requests)
                 reason = f"{self.back_reason}keeping station onto the goal, {distance:.2f} m away"
-                return self._out(tuple(v), S.GUIDING, reason, True, now, requests)
-            keep_station = cfg.arrival.on_arrival is ArrivalAction.STATION_KEEP
-            if not keep_station and self._settle(distance, heading, current, now):
+            elif arrival.on_arrival is not ArrivalAction.STATION_KEEP and self._settle(distance, heading, current, now):
                 return self._handed_over(now, wall, requests)
-            return self._out(
-                tuple(v),
-                S.ARRIVED,
-                f"{distance:.2f} m from the goal (within reacquire_radius_m "
-                f"{cfg.arrival.reacquire_radius_m:g}); keeping station",
-                True,
-                now,
-                requests,
-            )
-        if self.degraded:
+            else:
+                state = S.ARRIVED
+                reason = f"{distance:.2f} m from the goal (within reacquire_radius_m {arrival.reacquire_radius_m:g})"
+                reason += "; keeping station"
+        elif self.degraded:
             wanted = self.station.update(now, error)
             speed = float(np.hypot(*wanted))
-            floor = cfg.command.min_speed_mps  # the fallback keeps way: a rudder boat cannot turn without it
-            if 1e-12 < speed < floor:
-                wanted = wanted * (floor / speed)
-            v = law.steer(wanted, heading, current, floor)
-            stalled = self.progress.update(now, p, wanted, distance)
-            why = " (no progress in direct pursuit either)" if stalled else ""
-            return self._out(
-                tuple(v),
-                S.GUIDING,
-                f"direct pursuit of the goal, {distance:.2f} m away: no progress "
-                f"along the field for {cfg.failsafe.stall_s:g} s{why}",
-                True,
-                now,
-                requests,
+            if 1e-12 < speed < cfg.command.min_speed_mps:  # direct pursuit makes progress
+                wanted = wanted * (cfg.command.min_speed_mps / speed)
+            v, yaw = self.helm.near(p, wanted, heading, current, distance)
+            why = " (no progress in direct pursuit either)" if self.progress.update(now, p, wanted, distance) else ""
+            reason = f"direct pursuit of the goal, {distance:.2f} m away: no progress along the field for "
+            reason += f"{cfg.failsafe.stall_s:g} s{why}"
+        else:
+            sp = law.decide(p, False, heading, current, self.helm.lookahead_m())
+            along = law.distance_along_field(p) if sp.state is S.GUIDING else None
+            if sp.state is S.GUIDING and self.progress.update(now, p, sp.ground_ned, distance, along):
+                return self._start_pursuit(now, wall, distance, requests)
+            v, yaw = self.helm.command(p, sp, heading, current, distance)
+            state, reason = (
+                sp.state,
+                sp.reason or f"{self.back_reason}following the field, {distance:.2f} m from the goal",
             )
-        sp = law.decide(p, False, heading, current)
-        if sp.state is S.GUIDING and self.progress.update(now, p, sp.ground_ned, distance):
-            return self._start_pursuit(now, wall, distance, requests)
-        reason = sp.reason or f"{self.back_reason}following the field, {distance:.2f} m from the goal"
-        return self._out(tuple(sp.velocity_ned), sp.state, reason, True, now, requests)
+        return self._out(tuple(v), state, reason, True, now, requests, yaw)
 
     def _start_pursuit(self, now: float, wall: float, distance: float, requests: list[ev.Request]) -> ev.Decision:
         self.degraded = True
@@ -340,26 +330,33 @@ class Supervisor:
 
     def _restart_estimates(self, forget_fixes: bool = False) -> None:
         self.vehicle.restart(forget_fixes)
+        self.helm.reset()
         self.station.reset()
         self.progress.reset()
         self.degraded = False
 
     # ------------------------------------------------------------------------------ output
-    def _out(self, v: Velocity, state: S, reason: str, send: bool, t: float, requests: Requests = ()) -> ev.Decision:
+    def _out(
+        self,
+        v: Velocity,
+        state: S,
+        reason: str,
+        send: bool,
+        t: float,
+        requests: Requests = (),
+        yaw: float | None = None,
+    ) -> ev.Decision:
+        """The decision; ``yaw`` [rad]: a heading-and-speed setpoint (velocity + yaw) from the helm."""
         if self.output_fault and state in (S.GUIDING, S.ARRIVED):
             state, reason = S.FAULT, f"setpoints are not going out ({self.reason})"
         self.separation_active = False
         if send and state in (S.GUIDING, S.ARRIVED) and self.cfg.fleet.enabled:
             v, reason = self._keep_separation(v, reason, t)
+            yaw = None if self.separation_active else yaw  # the filtered velocity goes as it is
         self._set_state(state, reason, t)
         velocity = (float(v[0]), float(v[1])) if send else None
-        yaw = None
-        if velocity is not None:
-            moving = math.hypot(*velocity) > 1e-9
-            if moving and self.cfg.command.with_yaw:
-                yaw = math.atan2(velocity[1], velocity[0])
-            elif not moving and self.cfg.failsafe.zero_with_yaw:
-                yaw = self.vehicle.heading_rad  # speed 0 at the current heading: Rover would otherwise turn north
+        guided = yaw if state in (S.GUIDING, S.ARRIVED) else None
+        yaw = None if velocity is None else self.helm.yaw_for(velocity, guided, self.vehicle.heading_rad)
         return ev.Decision(velocity, yaw, state, reason, self.degraded and state is S.GUIDING, tuple(requests))
 
     def _keep_separation(self, v: tuple[float, float], reason: str, t: float) -> tuple[tuple[float, float], str]:
@@ -373,7 +370,7 @@ class Supervisor:
 
     def zero_setpoint(self) -> tuple[tuple[float, float], float | None]:
         """Zero velocity, and the yaw that goes with it (the current heading, when so configured and known)."""
-        return ZERO, self.vehicle.heading_rad if self.cfg.failsafe.zero_with_yaw else None
+        return ZERO, self.helm.yaw_for(ZERO, None, self.vehicle.heading_rad)
 
     def _set_state(self, state: S, reason: str, t: float) -> None:
         if state is not self.state:

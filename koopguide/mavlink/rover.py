@@ -12,6 +12,7 @@ Used by both the guidance service and the simulator: this is the one copy.
 from __future__ import annotations
 
 import enum
+import math
 from collections.abc import Sequence
 
 from koopguide.mavlink.wire import mavlink
@@ -96,9 +97,18 @@ def message_interval(target: Target, message_id: int, rate_hz: float) -> mavlink
 def velocity_setpoint(
     target: Target, time_boot_ms: int, velocity_ned: Sequence[float], yaw_rad: float | None
 ) -> mavlink.MAVLink_message:
-    """SET_POSITION_TARGET_LOCAL_NED: velocity (N, E) [m/s] only (3559), or with yaw [rad] (2535)."""
+    """SET_POSITION_TARGET_LOCAL_NED: velocity (N, E) [m/s] only (3559), or with yaw [rad] (2535).
+
+    With yaw, Rover holds heading ``yaw`` at the speed |v| over ground along it, astern when the sent vx is
+    negative (GCS_MAVLink_Rover.cpp; docs/rover.md): the velocity is sent as (+-|v|, 0), the sign that of
+    its component along the yaw, so that a velocity pointing behind the heading means astern, and one ahead
+    never does (whatever its north component).
+    """
     vn, ve = (float(v) for v in velocity_ned)
     mask = MASK_VELOCITY if yaw_rad is None else MASK_VELOCITY_YAW
+    if yaw_rad is not None:
+        along = vn * math.cos(yaw_rad) + ve * math.sin(yaw_rad)
+        vn, ve = math.copysign(math.hypot(vn, ve), along), 0.0
     return mavlink.MAVLink_set_position_target_local_ned_message(
         time_boot_ms & 0xFFFFFFFF, target[0], target[1], mavlink.MAV_FRAME_LOCAL_NED, mask,
         0.0, 0.0, 0.0, vn, ve, 0.0, 0.0, 0.0, 0.0, 0.0 if yaw_rad is None else float(yaw_rad), 0.0,

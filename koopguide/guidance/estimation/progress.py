@@ -4,12 +4,13 @@ The distance made good along the wanted track is the odometer
 
     s(t) = sum over fixes of (p_k - p_{k-1}) . d_{k-1}     [m]
 
-with ``d`` the unit direction the guidance wanted over ground at the previous fix (the field's streamline,
-or the straight line to the goal in direct pursuit). Following the field, s grows at the boat's speed; a
-boat that stalls, circles or is held off by a current makes none. A boat that overshoots a turn of the
-field loses some s while it comes back (yet gets closer to the goal), so progress is measured from the
-best so far of both s and the straight-line distance to the goal: stalled when neither has improved by
-``stall_progress_m`` for ``stall_s``. Conventions: NED [m], vehicle seconds.
+with ``d`` the unit direction the guidance wanted over ground at the previous fix (the straight line to the
+goal in direct pursuit), or, following the field, the decrease of the distance to the goal along the field
+(law/field_distance.py; ``along_m``), which a boat shuttling to and fro across a hairpin of the field does
+not fake (the wanted direction turns with it, so the odometer would grow on both legs). A boat that
+stalls, circles or is held off by a current makes none. Progress is measured from the best so far of both
+s and the straight-line distance to the goal: stalled when neither has improved by ``stall_progress_m`` for
+``stall_s``. Conventions: NED [m], vehicle seconds.
 """
 
 from __future__ import annotations
@@ -30,11 +31,20 @@ class ProgressWatchdog:
         self._mark = None
         self._last = None
 
-    def update(self, t: float, p_ned: np.ndarray, wanted_ned: np.ndarray | None, distance_m: float) -> bool:
-        """Fold in position ``p_ned`` at ``t``, the wanted ground velocity there and the distance to the goal;
-        True when stalled."""
+    def update(
+        self,
+        t: float,
+        p_ned: np.ndarray,
+        wanted_ned: np.ndarray | None,
+        distance_m: float,
+        along_m: float | None = None,
+    ) -> bool:
+        """Fold in position ``p_ned`` at ``t``, the wanted ground velocity there and the distance to the goal
+        (``along_m``: and along the field, which then measures the progress instead); True when stalled."""
         p = np.asarray(p_ned, dtype=float)
-        if self._last is not None:
+        if along_m is not None:
+            self.odometer = -along_m
+        elif self._last is not None:
             self.odometer += float((p - self._last[0]) @ self._last[1])
         norm = float(np.hypot(*wanted_ned)) if wanted_ned is not None else 0.0
         direction = np.asarray(wanted_ned, dtype=float) / norm if norm > 1e-12 else np.zeros(2)

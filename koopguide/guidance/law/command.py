@@ -24,9 +24,11 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
+from koopguide.guidance.law.field_distance import field_distance_table
 from koopguide.guidance.law.frames import ModelFrame
 from koopguide.guidance.settings import (
     ArrivalSettings,
@@ -36,6 +38,7 @@ from koopguide.guidance.settings import (
     OutsideDomain,
 )
 from koopguide.model.field import FlowField
+from koopguide.model.grid_table import GridTable
 
 
 class GuidanceState(enum.Enum):
@@ -50,7 +53,8 @@ class GuidanceState(enum.Enum):
 
 
 ZERO = np.zeros(2)
-PURSUIT_STEPS = 4  # streamline steps per look-ahead (field evaluations per setpoint)
+PURSUIT_STEPS = 4  # streamline steps per look-ahead_m (field evaluations per setpoint)
+MAX_PURSUIT_STEPS = 16  # ... at most, for a look-ahead lengthened for a boat's turning circle
 CRAB_MIN_SPEED_MPS = 0.002  # the smallest crabbed setpoint: it carries the heading into the current [m/s]
 CURRENT_MIN_MPS = 0.005  # a current estimate below this is no reason to slow the approach [m/s]
 GRID_CHUNK = 1024  # field evaluations at a time when sampling a grid (bounds the lifted batch's memory)
@@ -117,13 +121,33 @@ class GuidanceLaw:
     def distance_to_goal(self, p_ned: np.ndarray) -> float:
         return float(np.hypot(*(np.asarray(p_ned) - self.goal_ned)))
 
+    @cached_property
+    def along_table(self) -> GridTable:
+        """The distance to the goal along the field over the domain (law/field_distance.py), built on first use."""
+        radius = self.arrival.radius_m / self.frame.scale
+        return field_distance_table(self.field, self.domain_lo, self.domain_hi, radius)
+
+    def distance_along_field(self, p_ned: np.ndarray) -> float:
+        """How far the boat at ``p_ned`` still has to go to the goal by following the field [m] (from outside
+        the domain: the straight way to its edge first)."""
+        x = self.frame.to_model(np.asarray(p_ned, dtype=float))
+        x0 = np.clip(x, self.domain_lo, self.domain_hi)
+        inside = self.along_table.at_one(x0)
+        along = inside[0] if inside is not None else float(np.hypot(*(x0 - self.frame.goal_model)))
+        return (along + float(np.hypot(*(x - x0)))) * self.frame.scale
+
     def field_velocity_ned(self, p_ned: np.ndarray) -> np.ndarray:
         """The scaled field velocity at ``p_ned`` [m/s] (the paper's rule; may contain NaN from a bad model)."""
         x = np.clip(self.frame.to_model(p_ned), self.domain_lo, self.domain_hi)
         return self.gain * self.frame.direction_to_ned(self.field.velocity(x))
 
     def decide(
-        self, p_ned: np.ndarray, arrived: bool, heading_rad: float | None = None, current_ned: np.ndarray | None = None
+        self,
+        p_ned: np.ndarray,
+        arrived: bool,
+        heading_rad: float | None = None,
+        current_ned: np.ndarray | None = None,
+        lookahead_m: float | None = None,
     ) -> Setpoint:
         """The setpoint at estimated position ``p_ned``; ``arrived`` is sticky once reached.
 
@@ -132,7 +156,8 @@ class GuidanceLaw:
         ``current_ned`` (the estimated water current [m/s], when known) is crabbed into, so that the ground
         track, not the heading, follows the field, and near the goal the boat comes to face the current.
         Within ``capture_radius_m`` the boat heads straight for the goal; within the arrival radius (and
-        once arrived) it keeps station there (``station_gain``).
+        once arrived) it keeps station there (``station_gain``). ``lookahead_m`` replaces the configured
+        look-ahead (a boat with a wide turning circle needs a longer one: guidance/helm.py).
         """
         p_ned = np.asarray(p_ned, dtype=float)
         if not np.all(np.isfinite(p_ned)):
@@ -152,7 +177,8 @@ class GuidanceLaw:
         try:
             v_model = self.field.velocity(x0)
             v = self.gain * self.frame.direction_to_ned(v_model)
-            direction = self.pursuit_direction(x0, v_model) if self.command.lookahead_m > 0 else v
+            ahead = self.command.lookahead_m if lookahead_m is None else lookahead_m
+            direction = self.pursuit_direction(x0, v_model, ahead) if ahead > 0 else v
         except (ArithmeticError, ValueError) as exc:
             return Setpoint(ZERO.copy(), GuidanceState.FAULT, f"field error: {exc}")
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(direction))):
@@ -235,17 +261,19 @@ class GuidanceLaw:
             v = v * (max(slowed, min(floor_mps, speed)) / speed)
         return limit(v, self.command.max_speed_mps)
 
-    def pursuit_direction(self, x0: np.ndarray, v0: np.ndarray) -> np.ndarray:
+    def pursuit_direction(self, x0: np.ndarray, v0: np.ndarray, lookahead_m: float) -> np.ndarray:
         """NED direction (not normalised) toward the point ``lookahead_m`` along the field's streamline
         from model point ``x0`` (where the field is ``v0``).
 
         Pure pursuit of the field's own streamline: a boat with a bounded turn rate anticipates the
         field's turns instead of overshooting them, and near the goal it aims at the goal itself.
         """
-        h = self.command.lookahead_m / self.frame.scale / PURSUIT_STEPS  # [model units]
+        base = max(self.command.lookahead_m, 1e-9)
+        steps = min(MAX_PURSUIT_STEPS, max(PURSUIT_STEPS, math.ceil(PURSUIT_STEPS * lookahead_m / base)))
+        h = lookahead_m / self.frame.scale / steps  # [model units]
         goal = np.asarray(self.frame.goal_model, dtype=float)
         x, v = x0, v0
-        for k in range(PURSUIT_STEPS):
+        for k in range(steps):
             if np.hypot(*(goal - x)) <= h:
                 x = goal
                 break

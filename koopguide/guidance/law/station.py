@@ -26,6 +26,8 @@ import math
 
 import numpy as np
 
+from koopguide.guidance.settings import GuidanceConfig
+
 MAX_STEP_S = 0.5  # a longer gap between updates integrates only this long (a stale or restarted estimate)
 LEAK_S = 30.0  # inside the dead band the integral decays with this time constant [s]
 
@@ -48,6 +50,12 @@ class StationKeeper:
         self.max_speed = max_speed_mps
         self.integral = np.zeros(2)  # ki * integral(e dt) [m/s]
         self.t: float | None = None  # vehicle time of the last update [s]
+
+    @classmethod
+    def from_config(cls, cfg: GuidanceConfig) -> StationKeeper:
+        """The station keeper of ``cfg.arrival`` (gains, anti-windup), capped at ``command.max_speed_mps``."""
+        a = cfg.arrival
+        return cls(a.station_gain, a.integral_gain_per_s2, a.integral_limit_mps, cfg.command.max_speed_mps, a.radius_m)
 
     def reset(self) -> None:
         """Forget the integral (a new approach, a restarted estimate, a teleport)."""

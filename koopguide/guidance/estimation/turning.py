@@ -1,0 +1,78 @@
+"""TurnAbility: how this boat turns, learned from its own telemetry while it is guided (pure, no I/O).
+
+The service does not know the boat it steers: a skid-steer or vectored boat turns on the spot, a boat with a
+single propeller and a rudder turns only with way through the water (its rudder force grows with the speed
+through the water; docs/rover.md, docs/guidance.md "Any boat"). Both are read from what the boat does when
+asked to turn, i.e. while the heading it was sent differs from its heading by more than ``ASKED_RAD``:
+
+* turns in place: it turned faster than ``PIVOT_RATE`` while slower than ``STILL_MPS`` through the water, for
+  ``PIVOT_S`` in a row (not the moment a boat reversing from ahead to astern passes through zero speed);
+* needs way: it stayed below ``STUCK_RATE`` while slower than ``SLOW_MPS`` for ``STUCK_S`` in a row
+  (a rudder boat asked to turn at a crawl). Until either is seen, the boat is taken to turn in place (the
+  Rover skid-steer default); evidence of the other kind replaces it;
+* turn rate [rad/s]: the fastest turn seen while asked to turn, fading with ``FADE_S`` (a floor of
+  ``RATE_FLOOR`` before any turn is seen), used to cap the speed near a point (see law/maneuver.py);
+* turning radius [m]: speed through the water over turn rate, ``u / |r|``, averaged over turns at speed
+  (``FAST_MPS`` and faster), the radius the pursuit's look-ahead must exceed.
+
+Conventions: speeds through the water along the heading [m/s], turn rates [rad/s], vehicle seconds.
+"""
+
+from __future__ import annotations
+
+import math
+
+ASKED_RAD = math.radians(40.0)  # a heading error this large asks for a hard turn
+STILL_MPS = 0.02  # slower than this through the water: "still" (a turn then is a turn in place) [m/s]
+SLOW_MPS = 0.06  # slower than this through the water: "at a crawl" [m/s]
+FAST_MPS = 0.08  # turns at this speed or faster measure the turning radius [m/s]
+PIVOT_RATE = math.radians(3.0)  # a turn this fast at a crawl is a turn in place [rad/s]
+STUCK_RATE = math.radians(2.0)  # slower than this at a crawl while asked to turn: no turn without way [rad/s]
+STUCK_S = 2.0  # ... for this long in a row [s]
+PIVOT_S = 1.0  # a turn in place is one that lasts this long [s]
+RATE_FLOOR = math.radians(4.0)  # the turn rate assumed before any hard turn is seen [rad/s]
+FADE_S = 60.0  # the fastest turn seen fades with this time constant [s]
+RADIUS_WEIGHT = 0.05  # weight of each new turning-radius sample in the running mean
+MAX_RADIUS_M = 20.0  # a larger u / |r| is not a turn (noise around straight running) [m]
+
+
+class TurnAbility:
+    """Fold in one sample per command with :meth:`update`; read :attr:`needs_way`, :attr:`turn_rate`,
+    :attr:`radius_m`."""
+
+    def __init__(self) -> None:
+        self.needs_way = False  # the boat does not turn without way through the water (seen, not assumed)
+        self.pivot_seen = False
+        self.turn_rate = RATE_FLOOR  # [rad/s]
+        self.radius_m: float | None = None  # turning radius at speed [m]; None before a turn at speed
+        self._stuck_since: float | None = None
+        self._pivot_since: float | None = None
+        self._t: float | None = None
+
+    def update(self, t: float, asked_error_rad: float | None, speed_water_mps: float, turn_rate_radps: float) -> None:
+        """One sample at vehicle time ``t``: the heading error the boat was sent (None: no heading asked),
+        its speed through the water along its heading and its turn rate."""
+        if not (math.isfinite(speed_water_mps) and math.isfinite(turn_rate_radps)):
+            return
+        dt = 0.0 if self._t is None or t <= self._t else t - self._t
+        self._t = t if self._t is None else max(self._t, t)
+        self.turn_rate = max(RATE_FLOOR, self.turn_rate * math.exp(-dt / FADE_S))
+        asked = asked_error_rad is not None and abs(asked_error_rad) >= ASKED_RAD
+        if not asked:
+            self._stuck_since = self._pivot_since = None
+            return
+        u, r = abs(speed_water_mps), abs(turn_rate_radps)
+        self.turn_rate = max(self.turn_rate, r)
+        pivoting = u < STILL_MPS and r >= PIVOT_RATE
+        stuck = u < SLOW_MPS and r < STUCK_RATE
+        self._pivot_since = (t if self._pivot_since is None else self._pivot_since) if pivoting else None
+        self._stuck_since = (t if self._stuck_since is None else self._stuck_since) if stuck else None
+        if self._pivot_since is not None and t - self._pivot_since >= PIVOT_S:
+            self.pivot_seen, self.needs_way = True, False
+        if self._stuck_since is not None and t - self._stuck_since >= STUCK_S:
+            self.needs_way = True
+        if u >= FAST_MPS and r > 1e-6 and u / r <= MAX_RADIUS_M:
+            radius = u / r
+            self.radius_m = (
+                radius if self.radius_m is None else self.radius_m + RADIUS_WEIGHT * (radius - self.radius_m)
+            )

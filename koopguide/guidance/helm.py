@@ -1,0 +1,164 @@
+"""The helm: from the ground velocity the guidance wants to the setpoint that gets this boat there (pure).
+
+Following the field, a boat that turns in place gets the law's velocity-only setpoint (crabbed into the current
+and slowed to turn, law/command.py). Near a point (within the capture radius, keeping station, pursuing the
+goal directly), and everywhere for a boat seen to need way through the water to turn, it gets a
+heading-and-speed setpoint, ahead or astern (law/maneuver.py): that is what lets a skid-steer boat back onto a
+goal behind it instead of circling it, and a rudder boat keep the way its rudder needs. How the boat turns is
+learned from its telemetry (estimation/turning.py). See docs/guidance.md "Any boat".
+
+Conventions: NED velocities ``(2,)`` [m/s], headings [rad] from north, turn rates [rad/s], vehicle seconds.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from koopguide.guidance.estimation.turning import TurnAbility
+from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceLaw, GuidanceState, Setpoint
+from koopguide.guidance.law.line_approach import LineApproach
+from koopguide.guidance.law.maneuver import CURRENT_MIN_MPS, ManeuverPlanner, wrap_pi
+from koopguide.guidance.settings import GuidanceConfig
+
+LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
+Command = tuple[np.ndarray, float | None]  # (velocity NED [m/s], yaw [rad] or None for velocity only)
+
+
+class Helm:
+    """Call :meth:`observe` once per command with the boat's state, then :meth:`near` or :meth:`follow`."""
+
+    def __init__(self, cfg: GuidanceConfig, law: GuidanceLaw) -> None:
+        self.cfg, self.law = cfg, law
+        self.ability = TurnAbility()
+        self.planner = ManeuverPlanner(cfg.command.max_speed_mps, cfg.command.turn_speed_mps)
+        self.line = LineApproach(cfg.command.max_speed_mps, cfg.arrival.station_gain, 0.5 * cfg.arrival.radius_m)
+        self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
+
+    def reset(self) -> None:
+        """A restarted vehicle (maybe another boat): forget how it turns."""
+        self.ability = TurnAbility()
+        self.planner.reset()
+        self.line.reset()
+        self.asked_heading = None
+
+    def lookahead_m(self) -> float | None:
+        """The pursuit look-ahead for this boat: for a boat that needs way, at least twice its turning radius
+        (pure pursuit asks for the curvature 2 sin(alpha) / L, so L >= 2 R never asks for a circle tighter
+        than R: Coulter (1992), "Implementation of the pure pursuit path tracking algorithm"); None: as
+        configured."""
+        radius = self.ability.radius_m
+        if not self.ability.needs_way or radius is None:
+            return None
+        return max(self.cfg.command.lookahead_m, 2.0 * radius)
+
+    def observe(
+        self,
+        t: float,
+        heading_rad: float | None,
+        turn_rate_radps: float | None,
+        velocity_ned: np.ndarray | None,
+        current_ned: np.ndarray | None,
+    ) -> None:
+        """The boat's heading, turn rate, ground velocity and the estimated current at vehicle time ``t``."""
+        if heading_rad is None or turn_rate_radps is None or velocity_ned is None:
+            return
+        water = np.asarray(velocity_ned, dtype=float) - (0.0 if current_ned is None else np.asarray(current_ned))
+        u = float(water[0] * math.cos(heading_rad) + water[1] * math.sin(heading_rad))
+        asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
+        self.ability.update(t, asked, u, turn_rate_radps)
+
+    def line_radius_m(self) -> float:
+        """Within this distance of the goal a boat that needs way makes for the line it will hold (twice its
+        turning radius: it has room to turn onto the line), and at least within the capture radius."""
+        return max(self.cfg.arrival.capture_radius_m, LINE_RADII * (self.ability.radius_m or 0.0))
+
+    def near(
+        self,
+        p_ned: np.ndarray,
+        wanted_ned: np.ndarray,
+        heading_rad: float | None,
+        current_ned: np.ndarray | None,
+        distance_m: float,
+    ) -> Command:
+        """Toward the goal ``distance_m`` away at ground velocity ``wanted_ned``: heading and speed, ahead or
+        astern (a boat that needs way: along the line it will hold, law/line_approach.py)."""
+        if heading_rad is None:  # no attitude: all that can be sent is a velocity
+            return self._velocity(self.law.steer(wanted_ned, None, self._current(current_ned), CRAB_MIN_SPEED_MPS))
+        if self.ability.needs_way:
+            return self._on_line(p_ned, heading_rad, current_ned)
+        self.line.reset()
+        m = self.planner.plan(
+            wanted_ned,
+            heading_rad,
+            self._current(current_ned),
+            self.ability,
+            distance_m,
+            slow_to_turn=self.cfg.command.turn_slowdown,
+        )
+        self.asked_heading = m.heading_rad
+        return m.velocity_ned, m.heading_rad
+
+    def follow(
+        self,
+        p_ned: np.ndarray,
+        sp: Setpoint,
+        heading_rad: float | None,
+        current_ned: np.ndarray | None,
+        distance_m: float,
+    ) -> Command:
+        """Following the field: the law's setpoint ``sp``, or heading and speed for a boat that needs way."""
+        if self.ability.needs_way and heading_rad is not None and sp.ground_ned is not None:
+            if distance_m <= self.line_radius_m():
+                return self._on_line(p_ned, heading_rad, current_ned)
+            self.line.reset()
+            m = self.planner.plan(
+                sp.ground_ned, heading_rad, self._current(current_ned), self.ability, slow_to_turn=False
+            )
+            self.asked_heading = m.heading_rad
+            return m.velocity_ned, m.heading_rad
+        self.planner.reset()
+        self.line.reset()
+        return self._velocity(np.asarray(sp.velocity_ned, dtype=float))
+
+    def command(
+        self,
+        p_ned: np.ndarray,
+        sp: Setpoint,
+        heading_rad: float | None,
+        current_ned: np.ndarray | None,
+        distance_m: float,
+    ) -> Command:
+        """The law's decision ``sp`` (guiding, hold, fault) as a setpoint: within the capture radius as near a
+        point, beyond it as following the field; a zero or non-guiding decision goes as it is."""
+        if sp.state is not GuidanceState.GUIDING or sp.ground_ned is None:
+            return np.asarray(sp.velocity_ned, dtype=float), None
+        if distance_m <= self.cfg.arrival.capture_radius_m:
+            return self.near(p_ned, sp.ground_ned, heading_rad, current_ned, distance_m)
+        return self.follow(p_ned, sp, heading_rad, current_ned, distance_m)
+
+    def yaw_for(self, velocity: tuple[float, float], yaw: float | None, heading_rad: float | None) -> float | None:
+        """The yaw to send with ``velocity`` [rad]: the helm's own (``yaw``); else the velocity's direction with
+        ``command.with_yaw``; a zero velocity goes at the current heading with ``failsafe.zero_with_yaw``
+        (velocity-only zero is "heading north at speed 0" to Rover, and a skid-steer boat would pivot north)."""
+        if yaw is not None:
+            return yaw
+        if math.hypot(*velocity) > 1e-9:
+            return math.atan2(velocity[1], velocity[0]) if self.cfg.command.with_yaw else None
+        return heading_rad if self.cfg.failsafe.zero_with_yaw else None
+
+    def _on_line(self, p_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None) -> Command:
+        c = self._current(current_ned)
+        c = c if c is not None and float(np.hypot(*c)) >= CURRENT_MIN_MPS else None
+        self.line.aim(p_ned, self.law.goal_ned, heading_rad, c)
+        m = self.line.command(p_ned, self.law.goal_ned, self.ability.radius_m)
+        self.asked_heading = m.heading_rad
+        return m.velocity_ned, m.heading_rad
+
+    def _current(self, current_ned: np.ndarray | None) -> np.ndarray | None:
+        return current_ned if self.cfg.command.current_compensation else None
+
+    def _velocity(self, v: np.ndarray) -> Command:
+        self.asked_heading = math.atan2(v[1], v[0]) if float(np.hypot(*v)) > 1e-9 else self.asked_heading
+        return v, None

@@ -1,0 +1,119 @@
+"""Heading-and-speed commands for any boat: ahead or astern, slowed to turn or kept with way (pure math).
+
+ArduPilot Rover in GUIDED takes a velocity + yaw setpoint (type mask 2535) as "hold heading ``yaw`` at speed
+over ground ``s`` along it", with ``s < 0`` astern (docs/rover.md). That is the one command that works on
+every kind of boat near a point, where a velocity-only setpoint (heading = its direction, speed >= 0) makes a
+boat turn toward wherever it should go, however far round that is:
+
+* the heading: along the velocity the boat needs through the water, ``w = v_ground - c`` (with the estimated
+  current ``c``; its component across the heading is not corrected by Rover and carries the boat sideways,
+  so the ground velocity is exactly ``v_ground``: see law.command.crab), ahead; or the reverse heading,
+  astern, when ahead would need a turn of more than ``ASTERN_RAD`` and astern one of less (hysteresis: the
+  other way round to come back ahead). In a current the boat thus faces upstream when it holds station;
+* the speed: the ground velocity's component along the heading (signed; it is negative ahead, or positive
+  astern, when the boat is to be carried back by a current faster than it is to move);
+* a boat that turns in place is slowed to turn: by cos(heading error), and near a point to no more than the
+  speed whose turning circle still reaches it, ``|s| <= omega d / (2 |sin e|)`` (the circle tangent to the
+  heading through a point at distance d and bearing e off it has radius d / (2 |sin e|)), with omega the
+  boat's turn rate (estimation/turning.py);
+* a boat that needs way through the water to turn (a rudder boat) is never slowed below ``way_mps`` while it
+  turns, and it may go astern anywhere (not only near a point), so a field's hairpin is taken by backing
+  down its next leg instead of a turning circle the boat does not have.
+
+Conventions: NED velocities ``(2,)`` [m/s], headings [rad] from north, turn rates [rad/s], distances [m].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from koopguide.guidance.estimation.turning import TurnAbility
+
+ASTERN_RAD = math.radians(120.0)  # switch ahead <-> astern when the current direction needs a larger turn
+TURNING_RAD = math.radians(15.0)  # a heading error this large is a turn (for the way floor)
+CIRCLE_MARGIN = 0.7  # fraction of the geometric speed cap used (the turn rate is an estimate)
+MIN_SPEED_MPS = 0.002  # the smallest speed sent while steering: exactly 0 would be Rover's stop controller
+CURRENT_MIN_MPS = 0.005  # a current estimate below this is no current [m/s]
+
+
+def wrap_pi(angle: float) -> float:
+    """``angle`` [rad] wrapped into [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@dataclass(frozen=True)
+class Maneuver:
+    """A heading-and-speed command: ``speed_mps`` over ground along ``heading_rad`` (negative: backward over
+    ground); ``astern``: the boat moves stern first through the water."""
+
+    heading_rad: float
+    speed_mps: float
+    astern: bool
+
+    @property
+    def velocity_ned(self) -> np.ndarray:
+        """The commanded ground velocity along the heading [m/s] (points backward when astern)."""
+        return self.speed_mps * np.array([math.cos(self.heading_rad), math.sin(self.heading_rad)])
+
+
+class ManeuverPlanner:
+    """Chooses ahead or astern with hysteresis (its only state) and shapes the speed for the boat's turning."""
+
+    def __init__(self, max_speed_mps: float, way_mps: float) -> None:
+        self.max_speed = max_speed_mps
+        self.way = min(way_mps, max_speed_mps)
+        self.astern = False
+
+    def reset(self) -> None:
+        self.astern = False
+
+    def plan(
+        self,
+        v_ground: np.ndarray,
+        heading_rad: float,
+        current_ned: np.ndarray | None,
+        ability: TurnAbility,
+        distance_m: float | None = None,
+        allow_astern: bool = True,
+        slow_to_turn: bool = True,
+    ) -> Maneuver:
+        """The command that moves the boat over ground at ``v_ground`` [m/s] from ``heading_rad``.
+
+        ``distance_m`` (to the point it makes for, when near one) caps the speed of a boat that turns in place
+        so that its turning circle reaches the point (``slow_to_turn`` False: no slowing at all); a boat that
+        needs way keeps ``way_mps`` while it turns.
+        """
+        v = np.asarray(v_ground, dtype=float)
+        c = np.zeros(2) if current_ned is None else np.asarray(current_ned, dtype=float)
+        if float(np.hypot(*c)) < CURRENT_MIN_MPS:
+            c = np.zeros(2)
+        w = v - c  # through the water
+        if float(np.hypot(*w)) <= 1e-9:  # drifting with the current is wanted (or nothing at all): speed exactly 0
+            return Maneuver(heading_rad, 0.0, self.astern)  # is Rover's stop controller, throttle off: it drifts
+        ahead = math.atan2(w[1], w[0])
+        error_ahead = wrap_pi(ahead - heading_rad)
+        if not allow_astern:
+            self.astern = False
+        elif self.astern:
+            self.astern = abs(wrap_pi(error_ahead + math.pi)) <= ASTERN_RAD
+        else:
+            self.astern = abs(error_ahead) > ASTERN_RAD
+        h = wrap_pi(ahead + math.pi) if self.astern else ahead
+        error = wrap_pi(h - heading_rad)
+        s = float(v @ np.array([math.cos(h), math.sin(h)]))  # ground speed along the heading (signed)
+        # the sign of s is that of the ground motion along the heading: it can differ from ahead/astern (through
+        # the water) when the boat is to drift back slower than the current carries it
+        sign = math.copysign(1.0, s) if abs(s) >= MIN_SPEED_MPS else (-1.0 if self.astern else 1.0)
+        size = max(abs(s), MIN_SPEED_MPS)
+        if ability.needs_way:
+            if abs(error) >= TURNING_RAD:
+                size = max(size, self.way)  # a rudder turns the boat only with way on
+        elif slow_to_turn:
+            size *= max(math.cos(error), 0.0)
+            if distance_m is not None and abs(math.sin(error)) > 1e-6:
+                size = min(size, CIRCLE_MARGIN * ability.turn_rate * distance_m / (2.0 * abs(math.sin(error))))
+            size = max(size, MIN_SPEED_MPS)
+        return Maneuver(h, sign * min(size, self.max_speed), self.astern)

@@ -1,0 +1,157 @@
+"""Heading-and-speed commands for any boat (law/maneuver.py, law/line_approach.py, estimation/turning.py) and
+their encoding on the wire (mavlink/rover.py): pure functions, property-based where the claim is general.
+
+Conventions: NED [m], [m/s]; headings [rad] from north.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from koopguide.guidance.estimation.turning import RATE_FLOOR, TurnAbility
+from koopguide.guidance.law.line_approach import LineApproach
+from koopguide.guidance.law.maneuver import ASTERN_RAD, CURRENT_MIN_MPS, MIN_SPEED_MPS, ManeuverPlanner, wrap_pi
+from koopguide.mavlink.rover import MASK_VELOCITY_YAW, velocity_setpoint
+
+angles = st.floats(-math.pi, math.pi, allow_nan=False)
+speeds = st.floats(0.01, 0.3, allow_nan=False)
+currents = st.just(0.0) | st.floats(1.01 * CURRENT_MIN_MPS, 0.05)  # below CURRENT_MIN_MPS an estimate is noise
+
+
+def unit(angle: float) -> np.ndarray:
+    return np.array([math.cos(angle), math.sin(angle)])
+
+
+def pivoting() -> TurnAbility:
+    return TurnAbility()  # until seen otherwise, a boat turns in place
+
+
+def rudder() -> TurnAbility:
+    ability = TurnAbility()
+    ability.needs_way = True
+    return ability
+
+
+def rover_ground_velocity(heading: float, speed: float, current: np.ndarray) -> np.ndarray:
+    """What ArduPilot Rover makes good for heading + signed speed: the speed over ground along the heading
+    is held, the current's component across the heading is not corrected; a speed of exactly 0 is the stop
+    controller, throttle off, and the boat drifts with the current (docs/rover.md)."""
+    if speed == 0.0:
+        return current
+    h = unit(heading)
+    n = np.array([-h[1], h[0]])
+    return speed * h + float(current @ n) * n
+
+
+@settings(max_examples=300, deadline=None)
+@given(direction=angles, speed=speeds, c_dir=angles, c_speed=currents)
+def test_on_course_the_command_makes_good_exactly_the_wanted_ground_velocity(direction, speed, c_dir, c_speed) -> None:
+    v, c = speed * unit(direction), c_speed * unit(c_dir)
+    planner = ManeuverPlanner(max_speed_mps=1.0, way_mps=0.15)
+    first = planner.plan(v, 0.0, c, pivoting())
+    m = planner.plan(v, first.heading_rad, c, pivoting())  # the boat now faces the commanded heading
+    made_good = rover_ground_velocity(m.heading_rad, m.speed_mps, c)
+    if abs(float(v @ unit(m.heading_rad))) >= MIN_SPEED_MPS:  # not the tiny holding speed
+        assert np.allclose(made_good, v, atol=1e-9)
+    if c_speed == 0.0:
+        assert (m.speed_mps < 0) == m.astern  # in still water astern is backward over ground
+    assert float(np.hypot(*m.velocity_ned)) == pytest.approx(abs(m.speed_mps))
+
+
+@settings(max_examples=300, deadline=None)
+@given(direction=angles, heading=angles, speed=speeds)
+def test_ahead_or_astern_needs_no_turn_beyond_the_astern_angle(direction, heading, speed) -> None:
+    planner = ManeuverPlanner(max_speed_mps=1.0, way_mps=0.15)
+    m = planner.plan(speed * unit(direction), heading, None, pivoting())
+    assert abs(wrap_pi(m.heading_rad - heading)) <= ASTERN_RAD + 1e-9
+    assert m.astern == (abs(wrap_pi(direction - heading)) > ASTERN_RAD)
+    travel = unit(m.heading_rad) * math.copysign(1.0, m.speed_mps)
+    assert float(travel @ unit(direction)) == pytest.approx(1.0)  # it goes the wanted way, bow first or not
+
+
+def test_astern_has_hysteresis_so_a_goal_abeam_does_not_flip_it_every_command() -> None:
+    planner = ManeuverPlanner(max_speed_mps=1.0, way_mps=0.15)
+    behind = unit(math.radians(170.0)) * 0.1
+    assert planner.plan(behind, 0.0, None, pivoting()).astern
+    abeam_aft = unit(math.radians(110.0)) * 0.1  # ahead would need 110 deg: astern (70 deg) is kept
+    assert planner.plan(abeam_aft, 0.0, None, pivoting()).astern
+    forward = unit(math.radians(40.0)) * 0.1  # astern would need 140 deg > 120: ahead again
+    assert not planner.plan(forward, 0.0, None, pivoting()).astern
+
+
+@settings(max_examples=200, deadline=None)
+@given(error=st.floats(0.05, math.radians(119.0)), distance=st.floats(0.05, 1.0), rate=st.floats(0.05, 0.5))
+def test_a_boat_that_turns_in_place_is_slowed_until_its_turning_circle_reaches_the_point(error, distance, rate) -> None:
+    ability = pivoting()
+    ability.turn_rate = rate
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15)
+    m = planner.plan(unit(error) * 0.3, 0.0, None, ability, distance_m=distance)
+    heading_error = abs(wrap_pi(m.heading_rad))
+    radius = abs(m.speed_mps) / rate  # the circle it turns on at this speed [m]
+    if abs(m.speed_mps) > MIN_SPEED_MPS:
+        assert radius <= distance / (2.0 * math.sin(heading_error)) + 1e-9  # it can still reach the point
+    assert abs(m.speed_mps) <= 0.3 * max(math.cos(heading_error), 0.0) + MIN_SPEED_MPS + 1e-12
+
+
+@settings(max_examples=200, deadline=None)
+@given(error=st.floats(math.radians(16.0), math.radians(119.0)), wanted=st.floats(0.001, 0.3))
+def test_a_boat_that_needs_way_keeps_way_while_it_turns(error, wanted) -> None:
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15)
+    m = planner.plan(unit(error) * wanted, 0.0, None, rudder())
+    assert abs(m.speed_mps) >= 0.15 - 1e-12
+
+
+def test_turn_ability_tells_a_pivoting_boat_from_one_that_needs_way() -> None:
+    asked = math.radians(90.0)
+    skid = TurnAbility()
+    for k in range(40):  # at a standstill, turning at 7 deg/s toward a heading 90 deg off
+        skid.update(0.05 * k, asked, 0.0, math.radians(7.0))
+    assert skid.pivot_seen and not skid.needs_way and skid.turn_rate == pytest.approx(math.radians(7.0))
+    boat = TurnAbility()
+    for k in range(30):  # 1.5 s stuck: not yet
+        boat.update(0.05 * k, asked, 0.01, math.radians(0.5))
+    assert not boat.needs_way
+    for k in range(30, 60):
+        boat.update(0.05 * k, asked, 0.01, math.radians(0.5))
+    assert boat.needs_way and boat.turn_rate == pytest.approx(RATE_FLOOR)
+    for k in range(60, 100):  # turning at 0.2 m/s at 8 deg/s: a circle of 1.43 m
+        boat.update(0.05 * k, asked, 0.2, math.radians(8.0))
+    assert boat.radius_m == pytest.approx(0.2 / math.radians(8.0), rel=0.2)
+    reversing = TurnAbility()  # passing through zero speed while still turning is not a turn in place
+    for k, u in enumerate(np.linspace(0.15, -0.15, 12)):
+        reversing.update(0.05 * k, asked, float(u), math.radians(6.0))
+    assert not reversing.pivot_seen
+
+
+@pytest.mark.parametrize("current", [None, np.array([0.03, 0.0])])
+def test_line_approach_backs_down_onto_the_goal_and_steers_onto_the_line(current) -> None:
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05)
+    goal = np.zeros(2)
+    p = np.array([-0.5, 0.2])  # 0.5 m south of the goal, 0.2 m east of it
+    line.aim(p, goal, heading_rad=math.pi, current_ned=current)  # the boat faces south
+    m = line.command(p, goal, radius_m=0.8)
+    travel = -unit(m.heading_rad)  # astern: it moves opposite its bow
+    assert m.astern and m.speed_mps < 0
+    assert float(travel @ (goal - p)) > 0  # toward the goal
+    if current is None:  # still water: the line from the boat to the goal, bow the way it already faces
+        assert abs(wrap_pi(line.axis_rad - math.atan2(-0.2, 0.5) - math.pi)) < 1e-9
+    else:  # a current toward the north: bow upstream (south); the goal lies downstream, so astern
+        assert abs(wrap_pi(line.axis_rad - math.pi)) < 1e-9
+        assert travel[1] < 0  # ... and drifting west, back onto the line through the goal
+        assert abs(wrap_pi(m.heading_rad - math.pi)) < math.radians(30.0)  # bow still about upstream
+
+
+@settings(max_examples=200, deadline=None)
+@given(vn=st.floats(-1.0, 1.0), ve=st.floats(-1.0, 1.0), yaw=angles)
+def test_a_setpoint_with_yaw_goes_as_signed_speed_astern_exactly_when_it_points_behind(vn, ve, yaw) -> None:
+    msg = velocity_setpoint((1, 1), 0, (vn, ve), yaw)
+    assert msg.type_mask == MASK_VELOCITY_YAW and msg.vy == 0.0 and msg.yaw == pytest.approx(yaw)
+    assert abs(msg.vx) == pytest.approx(math.hypot(vn, ve), rel=1e-6, abs=1e-6)  # float32 on the wire
+    along = vn * math.cos(yaw) + ve * math.sin(yaw)
+    if abs(along) > 1e-6:
+        assert (msg.vx < 0) == (along < 0)  # Rover: a negative vx with yaw means astern
