@@ -19,7 +19,7 @@ import numpy as np
 from koopguide.guidance.estimation.turning import TurnAbility
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceLaw, GuidanceState, Setpoint
 from koopguide.guidance.law.line_approach import LineApproach
-from koopguide.guidance.law.maneuver import CURRENT_MIN_MPS, ManeuverPlanner, wrap_pi
+from koopguide.guidance.law.maneuver import CURRENT_MIN_MPS, Maneuver, ManeuverPlanner, wrap_pi
 from koopguide.guidance.settings import GuidanceConfig
 
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
@@ -97,8 +97,7 @@ class Helm:
             distance_m,
             slow_to_turn=self.cfg.command.turn_slowdown,
         )
-        self.asked_heading = m.heading_rad
-        return m.velocity_ned, m.heading_rad
+        return self._maneuver(m)
 
     def follow(
         self,
@@ -116,8 +115,7 @@ class Helm:
             m = self.planner.plan(
                 sp.ground_ned, heading_rad, self._current(current_ned), self.ability, slow_to_turn=False
             )
-            self.asked_heading = m.heading_rad
-            return m.velocity_ned, m.heading_rad
+            return self._maneuver(m)
         self.planner.reset()
         self.line.reset()
         return self._velocity(np.asarray(sp.velocity_ned, dtype=float))
@@ -153,8 +151,14 @@ class Helm:
         c = c if c is not None and float(np.hypot(*c)) >= CURRENT_MIN_MPS else None
         self.line.aim(p_ned, self.law.goal_ned, heading_rad, c)
         m = self.line.command(p_ned, self.law.goal_ned, self.ability.radius_m)
+        return self._maneuver(m)
+
+    def _maneuver(self, m: Maneuver) -> Command:
+        """Ahead (a positive speed over ground along the heading) goes as velocity only, which Rover reads the same
+        way (heading = its direction, speed = its norm) and any vehicle that follows velocities understands;
+        astern, or speed exactly 0 (hold the heading), needs the yaw."""
         self.asked_heading = m.heading_rad
-        return m.velocity_ned, m.heading_rad
+        return m.velocity_ned, (None if m.speed_mps > 0.0 else m.heading_rad)
 
     def _current(self, current_ned: np.ndarray | None) -> np.ndarray | None:
         return current_ned if self.cfg.command.current_compensation else None

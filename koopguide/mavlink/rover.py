@@ -100,15 +100,16 @@ def velocity_setpoint(
     """SET_POSITION_TARGET_LOCAL_NED: velocity (N, E) [m/s] only (3559), or with yaw [rad] (2535).
 
     With yaw, Rover holds heading ``yaw`` at the speed |v| over ground along it, astern when the sent vx is
-    negative (GCS_MAVLink_Rover.cpp; docs/rover.md): the velocity is sent as (+-|v|, 0), the sign that of
-    its component along the yaw, so that a velocity pointing behind the heading means astern, and one ahead
-    never does (whatever its north component).
+    negative (GCS_MAVLink_Rover.cpp; docs/rover.md). The velocity goes as it is (a true NED vector, which
+    a vehicle that follows velocities reads the same way) whenever the sign of its north component already
+    says ahead or astern rightly; otherwise as (+-|v|, 0), the sign that of its component along the yaw.
     """
     vn, ve = (float(v) for v in velocity_ned)
     mask = MASK_VELOCITY if yaw_rad is None else MASK_VELOCITY_YAW
     if yaw_rad is not None:
         along = vn * math.cos(yaw_rad) + ve * math.sin(yaw_rad)
-        vn, ve = math.copysign(math.hypot(vn, ve), along), 0.0
+        if (vn < 0.0) != (along < 0.0) and math.hypot(vn, ve) > 0.0:
+            vn, ve = math.copysign(math.hypot(vn, ve), along), 0.0
     return mavlink.MAVLink_set_position_target_local_ned_message(
         time_boot_ms & 0xFFFFFFFF, target[0], target[1], mavlink.MAV_FRAME_LOCAL_NED, mask,
         0.0, 0.0, 0.0, vn, ve, 0.0, 0.0, 0.0, 0.0, 0.0 if yaw_rad is None else float(yaw_rad), 0.0,

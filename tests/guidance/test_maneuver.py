@@ -146,12 +146,28 @@ def test_line_approach_backs_down_onto_the_goal_and_steers_onto_the_line(current
         assert abs(wrap_pi(m.heading_rad - math.pi)) < math.radians(30.0)  # bow still about upstream
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(vn=st.floats(-1.0, 1.0), ve=st.floats(-1.0, 1.0), yaw=angles)
-def test_a_setpoint_with_yaw_goes_as_signed_speed_astern_exactly_when_it_points_behind(vn, ve, yaw) -> None:
+def test_a_setpoint_with_yaw_is_read_by_rover_as_astern_exactly_when_it_points_behind(vn, ve, yaw) -> None:
     msg = velocity_setpoint((1, 1), 0, (vn, ve), yaw)
-    assert msg.type_mask == MASK_VELOCITY_YAW and msg.vy == 0.0 and msg.yaw == pytest.approx(yaw)
-    assert abs(msg.vx) == pytest.approx(math.hypot(vn, ve), rel=1e-6, abs=1e-6)  # float32 on the wire
+    assert msg.type_mask == MASK_VELOCITY_YAW and msg.yaw == pytest.approx(yaw)
+    assert math.hypot(msg.vx, msg.vy) == pytest.approx(math.hypot(vn, ve), rel=1e-6, abs=1e-6)  # float32 wire
     along = vn * math.cos(yaw) + ve * math.sin(yaw)
-    if abs(along) > 1e-6:
+    if abs(along) > 1e-6 and abs(vn) > 1e-6:
         assert (msg.vx < 0) == (along < 0)  # Rover: a negative vx with yaw means astern
+    if (vn < 0) == (along < 0):  # where both readings agree, the true NED vector goes (a velocity follower's)
+        assert (msg.vx, msg.vy) == (pytest.approx(vn, abs=1e-6), pytest.approx(ve, abs=1e-6))
+
+
+def test_ahead_goes_as_velocity_only_and_astern_or_a_hold_with_the_yaw() -> None:
+    from koopguide.guidance.helm import Helm
+    from koopguide.guidance.law.maneuver import Maneuver
+
+    helm = Helm.__new__(Helm)  # only the conversion is exercised
+    helm.asked_heading = None
+    v, yaw = helm._maneuver(Maneuver(0.5, 0.1, False))
+    assert yaw is None and np.allclose(v, 0.1 * unit(0.5))
+    v, yaw = helm._maneuver(Maneuver(0.5, -0.1, True))
+    assert yaw == 0.5 and np.allclose(v, -0.1 * unit(0.5))
+    v, yaw = helm._maneuver(Maneuver(0.5, 0.0, True))
+    assert yaw == 0.5 and np.allclose(v, 0.0)

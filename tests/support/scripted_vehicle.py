@@ -2,7 +2,8 @@
 
 It answers the way Rover does (HEARTBEAT with mode and armed flag, COMMAND_ACK, LOCAL_POSITION_NED and
 ATTITUDE stamped with its own time_boot_ms), moves at the commanded velocity through the water plus an
-optional current (a point mass; heading along the commanded velocity), and records every setpoint it
+optional current (a point mass; heading along the commanded velocity, or the yaw of a velocity + yaw setpoint,
+read as Rover does: speed |v| along the yaw, astern when vx < 0), and records every setpoint it
 receives with its own time. A test can pause its positions, or everything (link loss), make it ignore
 setpoints (a stalled boat), reboot it (its clock restarts, MANUAL, disarmed), and inject messages from a
 foreign system id or raw garbage. Runs on its own thread.
@@ -20,7 +21,7 @@ os.environ["MAVLINK20"] = "1"
 
 from pymavlink import mavutil
 
-from koopguide.mavlink.rover import GUIDED, HOLD, LOITER, MANUAL  # noqa: F401 (the tests use them from here)
+from koopguide.mavlink.rover import GUIDED, HOLD, LOITER, MANUAL, YAW_IGNORE  # noqa: F401 (the tests use them from here)
 
 mavutil.set_dialect("ardupilotmega")
 mavlink = mavutil.mavlink
@@ -55,6 +56,7 @@ class ScriptedVehicle:
         self.n, self.e = self.start_ned
         self.vn = self.ve = 0.0
         self.heading = 0.0  # [rad] from north
+        self.yaw: float | None = None  # the yaw of the last velocity + yaw setpoint [rad]
         self.t0 = time.monotonic()
         self.lock = threading.Lock()
         self.thread = threading.Thread(target=self._run, daemon=True)
@@ -106,7 +108,9 @@ class ScriptedVehicle:
                 ms = int(t * 1000)
                 if not self.pause_positions:
                     self.conn.mav.local_position_ned_send(ms, self.n, self.e, 0.0, vn, ve, 0.0)
-                if math.hypot(self.vn, self.ve) > 1e-6:
+                if self.yaw is not None:
+                    self.heading = self.yaw
+                elif math.hypot(self.vn, self.ve) > 1e-6:
                     self.heading = math.atan2(self.ve, self.vn)
                 self.conn.mav.attitude_send(ms, 0.0, 0.0, self.heading, 0.0, 0.0, 0.0)
             time.sleep(dt)
@@ -144,8 +148,14 @@ class ScriptedVehicle:
                 self.vn = self.ve = 0.0
 
     def _follow(self, msg) -> None:
-        if not self.ignore_setpoints:
-            self.vn, self.ve = msg.vx, msg.vy
+        if self.ignore_setpoints:
+            return
+        if msg.type_mask & YAW_IGNORE:  # velocity only: that velocity (through the water), heading along it
+            self.vn, self.ve, self.yaw = msg.vx, msg.vy, None
+        else:  # velocity + yaw, as Rover reads it: heading yaw, speed |v|, astern when vx < 0
+            speed = math.copysign(math.hypot(msg.vx, msg.vy), msg.vx)
+            self.yaw = msg.yaw
+            self.vn, self.ve = speed * math.cos(msg.yaw), speed * math.sin(msg.yaw)
 
     def _command(self, msg) -> None:
         if msg.command == mavlink.MAV_CMD_DO_SET_MODE:
