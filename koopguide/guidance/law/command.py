@@ -243,19 +243,20 @@ class GuidanceLaw:
         field's turns instead of overshooting them, and near the goal it aims at the goal itself.
         """
         h = self.command.lookahead_m / self.frame.scale / PURSUIT_STEPS  # [model units]
-        goal = np.asarray(self.frame.goal_model, dtype=float)
-        x, v = x0, v0
+        gx, gy = self.frame.goal_model
+        x0x, x0y = float(x0[0]), float(x0[1])
+        x, y, vx, vy = x0x, x0y, float(v0[0]), float(v0[1])  # in plain floats: this runs for every setpoint
         for k in range(PURSUIT_STEPS):
-            if np.hypot(*(goal - x)) <= h:
-                x = goal
+            if math.hypot(gx - x, gy - y) <= h:
+                x, y = gx, gy
                 break
             if k:
-                v = self.field.velocity(x)
-            norm = float(np.hypot(*v))
+                vx, vy = self.field.velocity_xy(x, y)
+            norm = math.hypot(vx, vy)
             if not norm > 1e-12:  # zero or NaN: stop here (NaN is caught by the caller)
                 break
-            x = x + v * (h / norm)
-        d = self.frame.direction_to_ned(x - x0)
+            x, y = x + vx * (h / norm), y + vy * (h / norm)
+        d = self.frame.direction_to_ned(np.array((x - x0x, y - x0y)))
         return d if float(np.hypot(*d)) > 1e-12 else self.frame.direction_to_ned(v0)
 
     def sample_grid(self, n: int) -> dict:

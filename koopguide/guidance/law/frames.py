@@ -14,6 +14,7 @@ With h = 90 degrees, model +x is East and +y is North.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -36,10 +37,13 @@ class ModelFrame:
         """The frame of ``settings`` (goal_ned, scale, heading_deg) for a model whose goal is ``goal_model``."""
         return cls(tuple(float(v) for v in goal_model), settings.goal_ned, settings.scale, settings.heading_deg)
 
-    @property
+    @functools.cached_property
     def R(self) -> np.ndarray:
+        """The rotation-reflection (computed once per frame: it is used for every setpoint)."""
         h = math.radians(self.heading_deg)
-        return np.array([[math.cos(h), math.sin(h)], [math.sin(h), -math.cos(h)]])
+        R = np.array([[math.cos(h), math.sin(h)], [math.sin(h), -math.cos(h)]])
+        R.flags.writeable = False
+        return R
 
     def to_ned(self, p: np.ndarray) -> np.ndarray:
         """Model points ``(..., 2)`` -> NED ``(..., 2)`` [m]."""
