@@ -9,7 +9,12 @@ What is measured, per command rate (10 and 50 Hz by default):
 * setpoints/s: velocity setpoints the daemon sent per simulated second over the window (the achieved
   command rate, in the vehicle time the rate is defined in);
 * CPU [% of one core]: ``time.process_time`` delta over the wall-clock delta of the window, for this
-  process - the daemon, its event loop and this benchmark's 4 Hz polling, nothing else.
+  process - the daemon, its event loop and zenoh threads, and this benchmark's 4 Hz polling, nothing else;
+* field queries: the service publishes its status on a real zenoh session (loopback, multicast scouting
+  off, a rendezvous port of its own) and answers ``koopguide/<id>/field?n=200`` from a dashboard-like
+  process (:mod:`koopguide.harness.field_asker`) once a second throughout the window (issue 11: "while
+  queries are answered"); the first one starts the service's field-grid worker process, as a dashboard
+  connecting mid-mission does. ``--query-hz 0`` measures without zenoh.
 
 How: the bundled boat simulator runs in a subprocess (:class:`sitl.process.SimulatorProcess`, so its CPU
 is not counted) at speed-up 1, one boat posed at the start of the model's first demonstration, heading
@@ -42,6 +47,16 @@ import numpy as np
 
 from koopguide.guidance import settings
 from koopguide.guidance.settings import GuidanceConfig
+from koopguide.harness.field_asker import (
+    DEFAULT_QUERIES,
+    QUERY_HZ,
+    QUERY_SIZES,
+    AskerError,
+    FieldAsker,
+    Queries,
+    free_tcp_port,
+    size_list,
+)
 
 TARGET_RATE_HZ = 50.0
 TARGET_P99_MS = 2.0
@@ -53,6 +68,8 @@ SIM_START_TIMEOUT_S = 30.0
 WARMUP_TIMEOUT_S = 60.0  # wall seconds from start to state guiding
 SHUTDOWN_TIMEOUT_S = 15.0  # wall seconds for the daemon to send zero velocity, switch mode and close
 POLL_S = 0.25  # wall seconds between checks (and latency-sample drains) during the window
+VEHICLE_ID = "bench"
+MAX_QUERY_HZ = 20.0
 PATH_MARGIN = 1.5  # the demo path must be this many times what the boat can cover in the window
 
 
@@ -73,6 +90,9 @@ class RateFigures:
     window_sim_s: float
     messages_per_s: float  # MAVLink messages from the vehicle handled per wall second
     states: list[str]  # daemon states during the window (just ["guiding"] for a clean window)
+    queries_answered: int = 0  # field queries asked in the window and answered with the grid
+    queries_failed: int = 0  # ... answered with an error, or not at all
+    query_ms_max: float | None = None  # the slowest answered query's round trip [ms]
 
 
 # ------------------------------------------------------------------------------------------ model
@@ -118,6 +138,7 @@ def scenario(model: Path, rate_hz: float, seconds: float) -> Scenario:
     demo = data.load_source(source).trajectories[0]
     port = free_udp_port()
     overrides: dict[str, Any] = {
+        "vehicle_id": VEHICLE_ID,
         "arm": True,
         "mavlink": {"endpoint": f"udp:127.0.0.1:{port}", "position_rate_hz": POSITION_RATE_HZ},
         "command": {"rate_hz": rate_hz},
@@ -137,20 +158,34 @@ def scenario(model: Path, rate_hz: float, seconds: float) -> Scenario:
 
 
 # ------------------------------------------------------------------------------------------ measurement
-async def measure_rate(model: Path, rate_hz: float, seconds: float, log_dir: Path | None = None) -> RateFigures:
-    """Start the simulator and the daemon, warm up to guiding, measure one window, stop both; with
-    ``log_dir``, the daemon writes its mission log there (``koopguide run --log``)."""
+async def measure_rate(
+    model: Path, rate_hz: float, seconds: float, log_dir: Path | None = None, queries: Queries = DEFAULT_QUERIES
+) -> RateFigures:
+    """Start the simulator and the daemon, warm up to guiding, measure one window with field queries
+    asked throughout, stop all; with ``log_dir``, the daemon writes its mission log there (``--log``)."""
+    from koopguide.bus.zenoh_config import default_zenoh_config
     from koopguide.guidance.daemon import GuidanceDaemon
+    from koopguide.guidance.latency import settle_heap
     from koopguide.guidance.law.command import GuidanceState
     from sitl.process import SimulatorProcess
 
     setup = scenario(model, rate_hz, seconds)
     log_path = None if log_dir is None else log_dir / f"bench-{rate_hz:g}hz.mcap"
-    daemon = await GuidanceDaemon.create(setup.cfg, model, zenoh_config=None, log_path=log_path)
+    zport = free_tcp_port()
+    zenoh_config = default_zenoh_config(zport) if queries.hz > 0 else None
+    daemon = await GuidanceDaemon.create(setup.cfg, model, zenoh_config=zenoh_config, log_path=log_path)
+    settle_heap()  # as `koopguide run` does once started
     runner = asyncio.create_task(daemon.run())
     simulator = SimulatorProcess(setup.sim_overrides, start_timeout_s=SIM_START_TIMEOUT_S)
     sim_started = False
+    answers: list[dict[str, Any]] = []
+    asker = None
     try:
+        if queries.hz > 0:
+            try:
+                asker = await FieldAsker.start(zport, VEHICLE_ID, queries)
+            except AskerError as exc:
+                raise BenchError(f"{rate_hz:g} Hz: {exc}") from exc
         try:
             await asyncio.to_thread(simulator.__enter__)
         except (RuntimeError, TimeoutError) as exc:
@@ -181,6 +216,8 @@ async def measure_rate(model: Path, rate_hz: float, seconds: float, log_dir: Pat
         daemon.drain_latencies()  # warm-up samples
         first_transition = len(daemon.transitions)
         sent_0, sim_0, received_0 = daemon.setpoints_sent, daemon.clock.now(), link.stats.received
+        if asker is not None:
+            asker.go()
         wall_0, cpu_0 = time.perf_counter(), time.process_time()
         end = wall_0 + seconds
         while (left := end - time.perf_counter()) > 0:
@@ -192,11 +229,18 @@ async def measure_rate(model: Path, rate_hz: float, seconds: float, log_dir: Pat
         latencies_ms += daemon.drain_latencies()
         states = [daemon.transitions[first_transition - 1][1]] if first_transition else []
         states += [state for _, state in daemon.transitions[first_transition:]]
+        if asker is not None:
+            try:
+                answers = await asker.answers(seconds)
+            except AskerError as exc:
+                raise BenchError(f"{rate_hz:g} Hz: {exc}") from exc
     finally:
         try:
             daemon.stop()
             await _stopped(runner, rate_hz)
         finally:
+            if asker is not None:
+                await asker.close()
             if sim_started:
                 await asyncio.to_thread(simulator.close)
 
@@ -216,6 +260,9 @@ async def measure_rate(model: Path, rate_hz: float, seconds: float, log_dir: Pat
         window_sim_s=sim_s,
         messages_per_s=(received_1 - received_0) / wall_s,
         states=states,
+        queries_answered=sum(a["ok"] for a in answers),
+        queries_failed=sum(not a["ok"] for a in answers),
+        query_ms_max=max((a["ms"] for a in answers if a["ok"]), default=None),
     )
 
 
@@ -227,8 +274,10 @@ async def _stopped(runner: asyncio.Task, rate_hz: float) -> None:
         raise BenchError(f"{rate_hz:g} Hz: the daemon did not shut down within {SHUTDOWN_TIMEOUT_S:g} s") from None
 
 
-async def measure(model: Path, rates_hz: list[float], seconds: float, log_dir: Path | None = None) -> list[RateFigures]:
-    return [await measure_rate(model, rate, seconds, log_dir) for rate in rates_hz]
+async def measure(
+    model: Path, rates_hz: list[float], seconds: float, log_dir: Path | None = None, queries: Queries = DEFAULT_QUERIES
+) -> list[RateFigures]:
+    return [await measure_rate(model, rate, seconds, log_dir, queries) for rate in rates_hz]
 
 
 # ------------------------------------------------------------------------------------------ report
@@ -247,7 +296,7 @@ def print_table(machine: dict[str, Any], figures: list[RateFigures], target: dic
     )
     print(
         f"{'rate_hz':>7}  {'setpoints/s':>11}  {'p50 ms':>7}  {'p99 ms':>7}  {'max ms':>7}  {'samples':>7}  "
-        f"{'CPU %':>6}  {'msgs/s':>6}  states"
+        f"{'CPU %':>6}  {'msgs/s':>6}  {'queries':>7}  {'q max ms':>8}  states"
     )
 
     def ms(value: float | None) -> str:
@@ -257,8 +306,16 @@ def print_table(machine: dict[str, Any], figures: list[RateFigures], target: dic
         print(
             f"{f.rate_hz:7g}  {f.setpoints_per_s:11.2f}  {ms(f.latency_p50_ms)}  {ms(f.latency_p99_ms)}  "
             f"{ms(f.latency_max_ms)}  {f.samples:7d}  {f.cpu_pct:6.2f}  {f.messages_per_s:6.1f}  "
+            f"{f.queries_answered:3d}/{f.queries_answered + f.queries_failed:<3d}  {ms(f.query_ms_max):>8}  "
             f"{','.join(f.states)}"
         )
+    queries = (
+        f"field queries n={','.join(map(str, machine['query_sizes']))} at {machine['query_hz']:g} Hz "
+        "answered during each window"
+        if machine["query_hz"] > 0
+        else "no zenoh, no field queries"
+    )
+    print(f"{queries}; queries column: answered/asked in the window")
     measured = f"{target['p99_ms']:.3f} ms" if target["p99_ms"] is not None else "no samples"
     print(f"target p99 <= {TARGET_P99_MS:g} ms at {TARGET_RATE_HZ:g} Hz: {target['result']} ({measured})")
 
@@ -283,6 +340,18 @@ def main(argv: list[str] | None = None) -> int:
         default=list(DEFAULT_RATES_HZ),
         help="command rates in Hz, comma-separated (default 10,50)",
     )
+    parser.add_argument(
+        "--query-hz",
+        type=float,
+        default=QUERY_HZ,
+        help=f"zenoh field queries per second during the window (default {QUERY_HZ:g}; 0: no zenoh at all)",
+    )
+    parser.add_argument(
+        "--query-sizes",
+        type=size_list,
+        default=list(QUERY_SIZES),
+        help="their grid sizes n, cycled, comma-separated (default 200; more than 4 sizes: no cache hits)",
+    )
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     parser.add_argument(
         "--log",
@@ -292,12 +361,16 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not args.seconds > 0:
         parser.error(f"--seconds must be > 0, got {args.seconds:g}")
+    if not 0 <= args.query_hz <= MAX_QUERY_HZ:
+        parser.error(f"--query-hz must be in 0 .. {MAX_QUERY_HZ:g}, got {args.query_hz:g}")
+    queries = Queries(args.query_hz, tuple(args.query_sizes))
 
     try:
         with tempfile.TemporaryDirectory(prefix="koopguide-bench-") as workdir:
             model = trained_model(args.model, Path(workdir))
             model_label = str(model) if model.parent != Path(workdir) else "Zshape trained for this run (deleted)"
-            figures = asyncio.run(measure(model, args.rates, args.seconds, Path(workdir) if args.log else None))
+            log_dir = Path(workdir) if args.log else None
+            figures = asyncio.run(measure(model, args.rates, args.seconds, log_dir, queries))
     except BenchError as exc:
         print(f"koopguide bench guidance: error: {exc}", file=sys.stderr)
         return 1
@@ -308,6 +381,8 @@ def main(argv: list[str] | None = None) -> int:
         "model": model_label,
         "seconds": args.seconds,
         "mission_log": args.log,
+        "query_hz": queries.hz,
+        "query_sizes": list(queries.sizes),
     }
     target = verdict(figures)
     if args.json:
