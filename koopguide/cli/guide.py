@@ -110,6 +110,8 @@ async def serve(cfg: Any, model: Path, zenoh_config: Any, log_path: Path | None 
     from koopguide.guidance.latency import settle_heap
 
     daemon = await GuidanceDaemon.create(cfg, model, zenoh_config, log_path)
+    if daemon.bus is not None and daemon.bus.enabled:
+        daemon.field_grids.start()  # the field-query worker now, not mid-mission at a dashboard's first query
     settle_heap()  # no full garbage collection of the start-up objects between a fix and its setpoint
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -13,8 +13,8 @@ What is measured, per command rate (10 and 50 Hz by default):
 * field queries: the service publishes its status on a real zenoh session (loopback, multicast scouting
   off, a rendezvous port of its own) and answers ``koopguide/<id>/field?n=200`` from a dashboard-like
   process (:mod:`koopguide.harness.field_asker`) once a second throughout the window (issue 11: "while
-  queries are answered"); the first one starts the service's field-grid worker process, as a dashboard
-  connecting mid-mission does. ``--query-hz 0`` measures without zenoh.
+  queries are answered"); the service is started as ``koopguide run`` starts it (the field-grid worker
+  process started, the start-up heap frozen) before the warm-up. ``--query-hz 0`` measures without zenoh.
 
 The simulator shares this machine's CPUs with the service, which a vehicle does not: when the setpoint's
 datagram wakes it, the kernel may switch to it before ``sendto`` returns to the service (wake-up
@@ -168,7 +168,9 @@ async def measure_rate(
     zport = free_tcp_port()
     zenoh_config = default_zenoh_config(zport) if queries.hz > 0 else None
     daemon = await GuidanceDaemon.create(setup.cfg, model, zenoh_config=zenoh_config, log_path=log_path)
-    settle_heap()  # as `koopguide run` does once started
+    if daemon.bus is not None and daemon.bus.enabled:  # as `koopguide run` does once started
+        daemon.field_grids.start()
+    settle_heap()
     runner = asyncio.create_task(daemon.run())
     simulator = SimulatorProcess(setup.sim_overrides, start_timeout_s=SIM_START_TIMEOUT_S)
     sim_started = False
