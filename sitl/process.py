@@ -71,6 +71,11 @@ class SimulatorProcess:
     ) -> None:
         self.close()
 
+    @property
+    def pid(self) -> int | None:
+        """The simulator's process id (None before it started)."""
+        return self._proc.pid if self._proc is not None else None
+
     def poll(self) -> int | None:
         """The simulator's exit code if it has exited, else None (also None before it started)."""
         return self._proc.poll() if self._proc is not None else None

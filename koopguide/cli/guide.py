@@ -107,8 +107,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 async def serve(cfg: Any, model: Path, zenoh_config: Any, log_path: Path | None = None) -> int:
     """Run the daemon until SIGINT/SIGTERM; exit code 0 after a clean shutdown."""
     from koopguide.guidance.daemon import GuidanceDaemon
+    from koopguide.guidance.latency import settle_heap
 
     daemon = await GuidanceDaemon.create(cfg, model, zenoh_config, log_path)
+    if daemon.bus is not None and daemon.bus.enabled:
+        daemon.field_grids.start()  # the field-query worker now, not mid-mission at a dashboard's first query
+    settle_heap()  # no full garbage collection of the start-up objects between a fix and its setpoint
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, daemon.stop)

@@ -263,9 +263,7 @@ class GuidanceDaemon:
 
     def _apply(self, decision: ev.Decision) -> bool:
         """Send the decision's setpoint (True when one went out) and requests."""
-        sent = decision.velocity_ned is not None and self._send_velocity(
-            np.array(decision.velocity_ned), decision.yaw_rad
-        )
+        sent = decision.velocity_ned is not None and self._send_velocity(decision.velocity_ned, decision.yaw_rad)
         for request in decision.requests:
             self._send(self._request_message(request))
         self._log_notes()
@@ -288,19 +286,21 @@ class GuidanceDaemon:
 
     def _send_zero(self) -> bool:
         velocity, yaw = self.supervisor.zero_setpoint()
-        return self._send_velocity(np.array(velocity), yaw)
+        return self._send_velocity(velocity, yaw)
 
-    def _send_velocity(self, v: np.ndarray, yaw: float | None = None) -> bool:
-        if not np.all(np.isfinite(v)):  # the last line of defence: never put a NaN on the wire
-            v = np.zeros(2)
+    def _send_velocity(self, v: tuple[float, float] | np.ndarray, yaw: float | None = None) -> bool:
+        vn, ve = float(v[0]), float(v[1])
+        if not (math.isfinite(vn) and math.isfinite(ve)):  # the last line of defence: never a NaN on the wire
+            vn = ve = 0.0
         ms = int((time.monotonic() - self._boot) * 1000)
-        if self._send(rover.velocity_setpoint(self.target, ms, v, yaw)):
-            self.last_cmd = v.copy()
+        if self._send(rover.velocity_setpoint(self.target, ms, (vn, ve), yaw)):
+            self.last_cmd = np.array((vn, ve))
             self.setpoints_sent += 1
-            self.max_cmd_speed = max(self.max_cmd_speed, float(np.hypot(*v)))
-            self.supervisor.setpoint_sent(self.clock.now())
+            self.max_cmd_speed = max(self.max_cmd_speed, math.hypot(vn, ve))
+            now = self.clock.now()
+            self.supervisor.setpoint_sent(now)
             if self.recorder is not None:
-                self.recorder.setpoint(self.clock.now(), v, yaw)
+                self.recorder.setpoint(now, (vn, ve), yaw)
             return True
         return False
 

@@ -18,6 +18,8 @@ import numpy as np
 from koopguide.guidance.events import Attitude, GlobalFix, Note, PositionFix
 from koopguide.guidance.settings import LimitSettings
 
+Point = np.ndarray | tuple[float, float]  # (N, E) [m]
+
 
 class InputGate:
     """Checks inputs against ``limits``; counts rejections per kind; rate-limits the log lines."""
@@ -47,7 +49,7 @@ class InputGate:
         """Finite, within max_position_m, at most max_speed_mps; otherwise rejected (False)."""
         lim = self.limits
         p, v = fix.position_ned, fix.velocity_ned
-        if not all(math.isfinite(x) for x in (*p, *v)):
+        if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(v[0]) and math.isfinite(v[1])):
             self.reject("non-finite", f"LOCAL_POSITION_NED position {list(p)} velocity {list(v)}", fix.wall_s)
             return False
         if max(abs(p[0]), abs(p[1])) > lim.max_position_m:
@@ -97,11 +99,11 @@ class TeleportGuard:
         self.limits = limits
         self._run: tuple[float, np.ndarray, float] | None = None  # (t first, position last, t last)
 
-    def reachable(self, p_from: np.ndarray, t_from: float, p_to: np.ndarray, t_to: float) -> bool:
+    def reachable(self, p_from: Point, t_from: float, p_to: Point, t_to: float) -> bool:
         reach = self.limits.max_jump_m + self.limits.max_speed_mps * max(t_to - t_from, 0.0)
-        return float(np.hypot(*(np.asarray(p_to) - np.asarray(p_from)))) <= reach
+        return math.hypot(p_to[0] - p_from[0], p_to[1] - p_from[1]) <= reach
 
-    def check(self, t: float, p: np.ndarray, predicted: np.ndarray, t_estimate: float) -> str:
+    def check(self, t: float, p: Point, predicted: Point, t_estimate: float) -> str:
         """ "ok" (reachable from the estimate), "teleport" or "confirmed" (a jump that stayed)."""
         if self.reachable(predicted, t_estimate, p, t):
             self._run = None

@@ -350,7 +350,7 @@ class Supervisor:
         if self.output_fault and state in (S.GUIDING, S.ARRIVED):
             state, reason = S.FAULT, f"setpoints are not going out ({self.reason})"
         self.separation_active = False
-        if send and state in (S.GUIDING, S.ARRIVED) and self.cfg.fleet.enabled:
+        if send and state in (S.GUIDING, S.ARRIVED) and self.cfg.fleet.enabled and self.neighbours.latest:
             v, reason = self._keep_separation(v, reason, t)
             yaw = None if self.separation_active else yaw  # the filtered velocity goes as it is
         self._set_state(state, reason, t)

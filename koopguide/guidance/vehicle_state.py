@@ -35,7 +35,7 @@ class VehicleState:
         self.tracker = KalmanTracker(cfg.estimator)
         self.current = CurrentEstimator(cfg.estimator)
         self.fix_t: float | None = None  # vehicle time of the newest accepted fix [s]
-        self.fix_ned: np.ndarray | None = None  # its (N, E) [m]
+        self.fix_ned: tuple[float, float] | None = None  # its (N, E) [m]
         self.fix_interval = 0.05  # typical vehicle time between fixes [s], learned from them
         self.attitude: tuple[float, float, float] | None = None  # (t, heading rad, turn rate rad/s)
         self.heading_rad: float | None = None  # the last known heading (any age): zero commands keep it
@@ -54,10 +54,13 @@ class VehicleState:
             self.fix_t = self.fix_ned = self.attitude = self.global_fix = None
 
     def on_position(self, fix: PositionFix) -> bool:
-        """Fold in a fix; False when it was rejected (out of bounds, out of order, a teleport)."""
+        """Fold in a fix; False when it was rejected (out of bounds, out of order, a teleport).
+
+        On the fix-to-setpoint path: plain floats, no arrays (docs/guidance.md "Latency")."""
         if not self.gate.fix_ok(fix):
             return False
-        t, p = fix.t_s, np.array(fix.position_ned, dtype=float)
+        t = fix.t_s
+        (n, e), (vn, ve) = fix.position_ned, fix.velocity_ned
         tracker = self.tracker
         if tracker.t is not None and t < tracker.t:
             self.gate.reject(
@@ -65,10 +68,11 @@ class VehicleState:
             )
             return False
         if tracker.t is not None and t - tracker.t <= self.cfg.estimator.max_dt_s:
-            predicted = tracker.predict(t)[0]
-            verdict = self.teleports.check(t, p, predicted, tracker.t)
+            predicted = tracker.predict_floats(t)[:2]
+            verdict = self.teleports.check(t, (n, e), predicted, tracker.t)
             if verdict == "teleport":
-                jump = float(np.hypot(*(p - predicted)))
+                p = np.array((n, e))
+                jump = math.hypot(n - predicted[0], e - predicted[1])
                 self.teleport_reason = (
                     f"position {np.round(p, 2).tolist()} m is {jump:.2f} m from the estimate, "
                     "farther than the vehicle can move; not following it"
@@ -80,28 +84,28 @@ class VehicleState:
                 self.notes.append(
                     Note(
                         logging.WARNING,
-                        f"the position jumped to {np.round(p, 2).tolist()} m and "
+                        f"the position jumped to {np.round(np.array((n, e)), 2).tolist()} m and "
                         f"stayed there for {self.cfg.limits.teleport_confirm_s:g} s; estimate restarted",
                     )
                 )
                 self.restart()
-        fix_vector = np.array([*fix.position_ned, *fix.velocity_ned], dtype=float)
+        fix_vector = (n, e, vn, ve)
         if not self.tracker.update(t, fix_vector).accepted:
             return False
-        p_est, v_est = self.tracker.predict(t)
+        pn, pe, vn_est, ve_est = self.tracker.predict_floats(t)
         lim = self.cfg.limits
-        inside = np.all(np.abs(p_est) <= lim.max_position_m) and float(np.hypot(*v_est)) <= lim.max_speed_mps
+        inside = max(abs(pn), abs(pe)) <= lim.max_position_m and math.hypot(vn_est, ve_est) <= lim.max_speed_mps
         if not inside:  # also False for NaN
             self.notes.append(
                 Note(
                     logging.WARNING,
-                    f"position estimate {p_est.tolist()} m, {v_est.tolist()} m/s out of bounds; restarted at the fix",
+                    f"position estimate {[pn, pe]} m, {[vn_est, ve_est]} m/s out of bounds; restarted at the fix",
                 )
             )
             self.tracker.reset(t, fix_vector)
         if self.fix_t is not None and t > self.fix_t:
             self.fix_interval += 0.1 * (min(t - self.fix_t, 1.0) - self.fix_interval)
-        self.fix_t, self.fix_ned = t, p
+        self.fix_t, self.fix_ned = t, (n, e)
         return True
 
     def on_attitude(self, att: Attitude) -> None:
@@ -153,8 +157,8 @@ class VehicleState:
         t_global, lat, lon = self.global_fix
         if abs(t_global - self.fix_t) > GEODETIC_PAIR_S:
             return None
-        n, e = self.fix_ned + np.array(geodetic_to_ned(latlon_deg[0], latlon_deg[1], lat, lon))
-        return round(float(n), 3), round(float(e), 3)
+        dn, de = geodetic_to_ned(latlon_deg[0], latlon_deg[1], lat, lon)
+        return round(float(self.fix_ned[0] + dn), 3), round(float(self.fix_ned[1] + de), 3)
 
     def take_notes(self) -> list[Note]:
         notes, self.notes = self.notes + self.gate.take_notes(), []

@@ -129,12 +129,12 @@ class FlowField:
         if self._table is not None:
             fg = self._table.at_one(x)
             if fg is not None:
-                return np.array(limit_step_one(x, fg[: self.dim], self._goal_list, fg[self.dim]))
+                return np.array(limit_step_one(x.tolist(), fg[: self.dim], self._goal_list, fg[self.dim]))
         y = self.learned_step(x[None])[0]  # the batch arithmetic, so one point and a batch agree bit for bit
         if self.limit is None:
             return y
         gamma = self.limit.ratio_one(x) if self._table is None else self.limit.outside
-        return np.array(limit_step_one(x, y.tolist(), self._goal_list, gamma))
+        return np.array(limit_step_one(x.tolist(), y.tolist(), self._goal_list, gamma))
 
     def learned_step(self, X: np.ndarray) -> np.ndarray:
         """The trained map ``f(x)`` itself, without the Lyapunov limit: ``(N, d) -> (N, d)``.
@@ -156,9 +156,21 @@ class FlowField:
         if X.shape == (self.dim,) and self._table is not None:  # the one-point hot path, in plain floats
             fg = self._table.at_one(X)
             if fg is not None:
-                y = limit_step_one(X, fg, self._goal_list, fg[self.dim])
-                return np.array([y[k] - X.item(k) for k in range(self.dim)])
+                x = X.tolist()
+                y = limit_step_one(x, fg, self._goal_list, fg[self.dim])
+                return np.array([y[k] - x[k] for k in range(self.dim)])
         return self.step(X) - X
+
+    def velocity_xy(self, x: float, y: float) -> tuple[float, float]:
+        """:meth:`velocity` of a 2-D field at the point ``(x, y)``, in plain floats (the same numbers): the
+        guidance law follows the field's streamline with it for every setpoint."""
+        table = self._table
+        fg = table.at_xy(x, y) if table is not None and self.dim == 2 else None
+        if fg is None:
+            v = self.velocity(np.array((x, y)))
+            return float(v[0]), float(v[1])
+        step = limit_step_one((x, y), fg, self._goal_list, fg[2])
+        return step[0] - x, step[1] - y
 
     def lift(self, X: np.ndarray) -> np.ndarray:
         """``Psi(X)`` (or ``Phi(X)`` if goal-centred), ``(N, nu + d)``."""

@@ -26,6 +26,7 @@ Where it can still fail: inside the tube wherever the demonstrations move away f
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,12 +79,12 @@ def _row_sq(e: np.ndarray) -> np.ndarray:
     return out
 
 
-def limit_step_one(x: np.ndarray, y: list[float], goal: list[float], gamma: float) -> list[float]:
-    """:func:`limit_step` for one state, in plain Python floats (``x`` an array, ``y`` and ``goal`` lists)."""
+def limit_step_one(x: Sequence[float], y: list[float], goal: list[float], gamma: float) -> list[float]:
+    """:func:`limit_step` for one state, in plain Python floats (``x``, ``y`` and ``goal`` sequences of floats)."""
     e2 = 0.0
     n2 = 0.0
     for k, g in enumerate(goal):
-        e = x.item(k) - g
+        e = x[k] - g
         e2 += e * e
         n = y[k] - g
         n2 += n * n

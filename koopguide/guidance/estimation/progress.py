@@ -15,7 +15,11 @@ s and the straight-line distance to the goal: stalled when neither has improved 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+Vector = tuple[float, float]  # (N, E)
 
 
 class ProgressWatchdog:
@@ -24,7 +28,7 @@ class ProgressWatchdog:
         self.stall_progress_m = stall_progress_m
         self.odometer = 0.0  # distance made good along the wanted directions [m]
         self._mark: tuple[float, float, float] | None = None  # (t, odometer, -distance) at the last progress
-        self._last: tuple[np.ndarray, np.ndarray] | None = None  # (position, unit direction) of the last update
+        self._last: tuple[Vector, Vector] | None = None  # (position [m], unit direction) of the last update
 
     def reset(self) -> None:
         self.odometer = 0.0
@@ -41,13 +45,14 @@ class ProgressWatchdog:
     ) -> bool:
         """Fold in position ``p_ned`` at ``t``, the wanted ground velocity there and the distance to the goal
         (``along_m``: and along the field, which then measures the progress instead); True when stalled."""
-        p = np.asarray(p_ned, dtype=float)
+        p = (float(p_ned[0]), float(p_ned[1]))  # plain floats: this runs for every setpoint
         if along_m is not None:
             self.odometer = -along_m
         elif self._last is not None:
-            self.odometer += float((p - self._last[0]) @ self._last[1])
-        norm = float(np.hypot(*wanted_ned)) if wanted_ned is not None else 0.0
-        direction = np.asarray(wanted_ned, dtype=float) / norm if norm > 1e-12 else np.zeros(2)
+            (n0, e0), (dn, de) = self._last
+            self.odometer += (p[0] - n0) * dn + (p[1] - e0) * de
+        norm = math.hypot(wanted_ned[0], wanted_ned[1]) if wanted_ned is not None else 0.0
+        direction = (float(wanted_ned[0]) / norm, float(wanted_ned[1]) / norm) if norm > 1e-12 else (0.0, 0.0)
         self._last = (p, direction)
         mark, step = self._mark, self.stall_progress_m
         if mark is None or self.odometer >= mark[1] + step or -distance_m >= mark[2] + step:

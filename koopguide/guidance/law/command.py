@@ -119,7 +119,8 @@ class GuidanceLaw:
         return np.asarray(self.frame.goal_ned, dtype=float)
 
     def distance_to_goal(self, p_ned: np.ndarray) -> float:
-        return float(np.hypot(*(np.asarray(p_ned) - self.goal_ned)))
+        g = self.frame.goal_ned
+        return math.hypot(float(p_ned[0]) - g[0], float(p_ned[1]) - g[1])
 
     @cached_property
     def along_table(self) -> GridTable:
@@ -160,7 +161,7 @@ class GuidanceLaw:
         look-ahead (a boat with a wide turning circle needs a longer one: guidance/helm.py).
         """
         p_ned = np.asarray(p_ned, dtype=float)
-        if not np.all(np.isfinite(p_ned)):
+        if not finite(p_ned):
             return Setpoint(ZERO.copy(), GuidanceState.FAULT, f"non-finite position estimate {p_ned.tolist()}")
         fence = self.failsafe.geofence_ned
         if fence is not None and not all(lo <= v <= hi for v, (lo, hi) in zip(p_ned, fence, strict=True)):
@@ -181,16 +182,16 @@ class GuidanceLaw:
             direction = self.pursuit_direction(x0, v_model, ahead) if ahead > 0 else v
         except (ArithmeticError, ValueError) as exc:
             return Setpoint(ZERO.copy(), GuidanceState.FAULT, f"field error: {exc}")
-        if not (np.all(np.isfinite(v)) and np.all(np.isfinite(direction))):
+        if not (finite(v) and finite(direction)):
             return Setpoint(ZERO.copy(), GuidanceState.FAULT, f"field gave {v.tolist()} at {p_ned.tolist()}")
-        speed = float(np.hypot(*v))
+        speed = math.hypot(v[0], v[1])
         if speed <= 1e-12:
             return Setpoint(ZERO.copy(), GuidanceState.GUIDING)
         captured = distance <= self.arrival.capture_radius_m
         # Near the goal the learned field is least certain (few demonstrations end from every side), and a
         # boat circling it at the speed floor never turns tightly enough to get in: head for the goal,
         # turning on the spot when facing away.
-        direction = to_goal if captured else direction / float(np.hypot(*direction))
+        direction = to_goal if captured else direction / math.hypot(direction[0], direction[1])
         # The approach cap is a model of the boat (it turns to face the current while it still moves); it
         # never slows the boat below min_approach_mps, or a boat unlike the model stalls short of the goal.
         cap = max(self.approach_cap(distance, direction, current_ned), self.arrival.min_approach_mps)
@@ -230,15 +231,15 @@ class GuidanceLaw:
         """
         if current_ned is None or not self.command.current_compensation:
             return math.inf
-        c = np.asarray(current_ned, dtype=float)
-        c_norm = float(np.hypot(*c))
+        cn, ce = float(current_ned[0]), float(current_ned[1])
+        c_norm = math.hypot(cn, ce)
         if c_norm < CURRENT_MIN_MPS:
             return math.inf
         arrival = self.arrival
         facing = math.radians(arrival.facing_deg)
         span = max(arrival.approach_radius_m - arrival.radius_m, 1e-9)
         theta = facing + (math.pi - facing) * min(max((distance - arrival.radius_m) / span, 0.0), 1.0)
-        alpha = math.acos(min(max(float(c @ direction) / c_norm, -1.0), 1.0))
+        alpha = math.acos(min(max((cn * float(direction[0]) + ce * float(direction[1])) / c_norm, -1.0), 1.0))
         if theta + alpha >= math.pi:  # the heading stays within theta at any speed
             return math.inf
         return c_norm * math.sin(theta) / math.sin(theta + alpha)
@@ -252,7 +253,7 @@ class GuidanceLaw:
         v = v_ground
         if current_ned is not None and self.command.current_compensation:
             v = crab(v_ground, current_ned, math.radians(self.arrival.facing_deg))
-        speed = float(np.hypot(*v))
+        speed = math.hypot(v[0], v[1])
         if speed <= 1e-12:
             return ZERO.copy()
         if heading_rad is not None and self.command.turn_slowdown:
@@ -271,19 +272,20 @@ class GuidanceLaw:
         base = max(self.command.lookahead_m, 1e-9)
         steps = min(MAX_PURSUIT_STEPS, max(PURSUIT_STEPS, math.ceil(PURSUIT_STEPS * lookahead_m / base)))
         h = lookahead_m / self.frame.scale / steps  # [model units]
-        goal = np.asarray(self.frame.goal_model, dtype=float)
-        x, v = x0, v0
+        gx, gy = self.frame.goal_model
+        x0x, x0y = float(x0[0]), float(x0[1])
+        x, y, vx, vy = x0x, x0y, float(v0[0]), float(v0[1])  # in plain floats: this runs for every setpoint
         for k in range(steps):
-            if np.hypot(*(goal - x)) <= h:
-                x = goal
+            if math.hypot(gx - x, gy - y) <= h:
+                x, y = gx, gy
                 break
             if k:
-                v = self.field.velocity(x)
-            norm = float(np.hypot(*v))
+                vx, vy = self.field.velocity_xy(x, y)
+            norm = math.hypot(vx, vy)
             if not norm > 1e-12:  # zero or NaN: stop here (NaN is caught by the caller)
                 break
-            x = x + v * (h / norm)
-        d = self.frame.direction_to_ned(x - x0)
+            x, y = x + vx * (h / norm), y + vy * (h / norm)
+        d = self.frame.direction_to_ned(np.array((x - x0x, y - x0y)))
         return d if float(np.hypot(*d)) > 1e-12 else self.frame.direction_to_ned(v0)
 
     def sample_grid(self, n: int) -> dict:
@@ -320,8 +322,8 @@ def crab(v_ground: np.ndarray, current_ned: np.ndarray, glide_limit_rad: float =
     v_ground = np.asarray(v_ground, dtype=float)
     c = np.asarray(current_ned, dtype=float)
     w = v_ground - c  # through the water [m/s]
-    w_norm = float(np.hypot(*w))
-    c_norm = float(np.hypot(*c))
+    w_norm = math.hypot(w[0], w[1])
+    c_norm = math.hypot(c[0], c[1])
     if w_norm <= 1e-9 or c_norm <= 1e-12:  # the current alone carries the boat there, or there is none
         return v_ground.copy()
     h = w / w_norm
@@ -358,9 +360,14 @@ def along_current(heading_rad: float | None, current_ned: np.ndarray | None, wit
     return abs(across) <= math.sin(math.radians(within_deg))
 
 
+def finite(v: np.ndarray) -> bool:
+    """Whether both components of a 2-vector are finite (cheaper than np.all(np.isfinite(v)) per setpoint)."""
+    return math.isfinite(v[0]) and math.isfinite(v[1])
+
+
 def limit(v: np.ndarray, max_speed: float) -> np.ndarray:
     """``v`` with its norm capped at ``max_speed`` (direction kept)."""
-    speed = float(np.hypot(*v))
+    speed = math.hypot(v[0], v[1])
     return v * (max_speed / speed) if speed > max_speed else v
 
 

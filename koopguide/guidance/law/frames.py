@@ -14,6 +14,7 @@ With h = 90 degrees, model +x is East and +y is North.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -36,19 +37,32 @@ class ModelFrame:
         """The frame of ``settings`` (goal_ned, scale, heading_deg) for a model whose goal is ``goal_model``."""
         return cls(tuple(float(v) for v in goal_model), settings.goal_ned, settings.scale, settings.heading_deg)
 
-    @property
+    @functools.cached_property
     def R(self) -> np.ndarray:
+        """The rotation-reflection (computed once per frame: it is used for every setpoint)."""
         h = math.radians(self.heading_deg)
-        return np.array([[math.cos(h), math.sin(h)], [math.sin(h), -math.cos(h)]])
+        R = np.array([[math.cos(h), math.sin(h)], [math.sin(h), -math.cos(h)]])
+        R.flags.writeable = False
+        return R
+
+    @functools.cached_property
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(goal_model, goal_ned, R.T) as read-only arrays, built once (every setpoint uses them)."""
+        out = (np.array(self.goal_model, dtype=float), np.array(self.goal_ned, dtype=float), self.R.T)
+        for a in out:
+            a.flags.writeable = False
+        return out
 
     def to_ned(self, p: np.ndarray) -> np.ndarray:
         """Model points ``(..., 2)`` -> NED ``(..., 2)`` [m]."""
-        return np.asarray(self.goal_ned) + self.scale * (np.asarray(p) - np.asarray(self.goal_model)) @ self.R.T
+        goal_model, goal_ned, R_T = self._arrays
+        return goal_ned + self.scale * (np.asarray(p) - goal_model) @ R_T
 
     def to_model(self, ned: np.ndarray) -> np.ndarray:
         """NED ``(..., 2)`` [m] -> model points ``(..., 2)`` (R is its own inverse)."""
-        return np.asarray(self.goal_model) + (np.asarray(ned) - np.asarray(self.goal_ned)) @ self.R.T / self.scale
+        goal_model, goal_ned, R_T = self._arrays
+        return goal_model + (np.asarray(ned) - goal_ned) @ R_T / self.scale
 
     def direction_to_ned(self, v: np.ndarray) -> np.ndarray:
         """Model-frame vectors ``(..., 2)`` -> NED vectors, rotated/reflected only (no scale)."""
-        return np.asarray(v) @ self.R.T
+        return np.asarray(v) @ self._arrays[2]
