@@ -20,14 +20,8 @@ from koopguide.base import data as demo_data
 from koopguide.base.config import Range
 from koopguide.model.certificate import FunnelSettings, certify_and_repair
 from koopguide.model.field import FlowField
-from koopguide.model.learn.losses import (
-    DivergenceOf,
-    divergence_loss,
-    goal_loss,
-    koopman_loss,
-    multistep_loss,
-    pair_losses,
-)
+from koopguide.model.learn.gradients import AdamW, FlatParams, LossWeights, loss_and_gradient
+from koopguide.model.learn.losses import DivergenceOf, koopman_loss, multistep_loss
 from koopguide.model.learn.model import FourierKoopman
 from koopguide.model.lyapunov import RatioLimit
 
@@ -143,54 +137,35 @@ def train(
 
     goal = torch.as_tensor(demos.goal, dtype=torch.float64)
     model = FourierKoopman(demos.dim, cfg.model.nu, cfg.model.rank, goal, cfg.model.goal_centred, gen).to(dtype)
+    params = FlatParams(*(t.detach() for t in (model.W, model.b, model.A, model.B)))
+    for t, view in zip((model.W, model.b, model.A, model.B), (params.W, params.b, params.A, params.B), strict=True):
+        t.data = view  # the module reads the flat parameters (the multi-step term's autograd path)
+    goal_t = model.goal
+    weights = LossWeights(cfg.loss.koopman, cfg.loss.state, cfg.loss.divergence, cfg.loss.goal, cfg.loss.divergence_of)
     steps = cfg.optim.steps
-    opt = AdamW(list(model.parameters()), cfg.optim.lr, cfg.optim.weight_decay)
+    opt = AdamW(params.flat, cfg.optim.lr, cfg.optim.weight_decay)
 
     n_pairs = x.shape[0]
     batch = min(cfg.optim.batch_size, n_pairs)
-    order = rng.permutation(n_pairs)
-    cursor = 0
-    terms: dict[str, float] = {}
-    for k in range(1, steps + 1):
-        if cursor + batch > n_pairs:  # a new epoch: reshuffle
-            order, cursor = rng.permutation(n_pairs), 0
-        idx = torch.as_tensor(order[cursor : cursor + batch])
-        cursor += batch
-        xb = x[idx]
-        yb = y[idx] + noise_sigma * torch.randn((batch, demos.dim), generator=gen, dtype=dtype) * noisy[idx]
-        loss_k, loss_s = pair_losses(model, xb, yb)
-        loss = cfg.loss.koopman * loss_k + cfg.loss.state * loss_s
-        pts = x[torch.as_tensor(rng.integers(0, n_pairs, size=cfg.loss.divergence_points))]
-        loss_d = divergence_loss(model, pts, cfg.loss.divergence_of)
-        loss = loss + cfg.loss.divergence * loss_d
-        if not cfg.model.goal_centred and cfg.loss.goal > 0:
-            loss_g = goal_loss(model)
-            loss = loss + cfg.loss.goal * loss_g
-        else:
-            loss_g = None
-        if win is not None:
-            wb = win[torch.as_tensor(rng.integers(0, win.shape[0], size=min(batch, win.shape[0])))]
-            loss_m = multistep_loss(model, wb)
-            loss = loss + cfg.loss.multistep * loss_m
-        else:
-            loss_m = None
-        opt.zero_grad()
-        loss.backward()
-        cosine = cfg.optim.schedule is LRSchedule.COSINE
-        opt.step(0.5 * (1.0 + math.cos(math.pi * (k - 1) / steps)) if cosine else 1.0)
-        if not math.isfinite(loss.item()):
-            raise FloatingPointError(f"training diverged at step {k}: loss {loss.item()}")
-        if progress is not None and (k % progress_every == 0 or k == steps):
-            terms = {"loss": loss.item(), "koopman": loss_k.item(), "state": loss_s.item(), "divergence": loss_d.item()}
-            if loss_g is not None:
-                terms["goal"] = loss_g.item()
-            if loss_m is not None:
-                terms["multistep"] = loss_m.item()
-            progress(k, steps, terms)
-
+    draws = _Draws(rng, gen, n_pairs, batch, cfg.loss.divergence_points, demos.dim, dtype)
+    losses = torch.empty(steps, dtype=dtype)
     with torch.no_grad():
+        for k in range(1, steps + 1):
+            idx, div_idx, noise = draws.next()
+            yb = torch.addcmul(y[idx], noise * noise_sigma, noisy[idx])
+            loss, terms_t = loss_and_gradient(params, goal_t, cfg.model.goal_centred, x[idx], yb, x[div_idx], weights)
+            if win is not None:
+                loss = loss + _multistep_into(params, model, win, rng, batch, cfg.loss.multistep, terms_t)
+            cosine = cfg.optim.schedule is LRSchedule.COSINE
+            opt.step(params.grad, 0.5 * (1.0 + math.cos(math.pi * (k - 1) / steps)) if cosine else 1.0)
+            losses[k - 1] = loss
+            if k % 100 == 0 or k == steps:
+                _check_finite(losses, k)
+            if progress is not None and (k % progress_every == 0 or k == steps):
+                progress(k, steps, {"loss": loss.item(), **{name: v.item() for name, v in terms_t.items()}})
+
         final_k = koopman_loss(model, x, y).item()
-    W, b, A, B = (p.detach().to(torch.float64).numpy().copy() for p in (model.W, model.b, model.A, model.B))
+    W, b, A, B = (t.to(torch.float64).numpy().copy() for t in (params.W, params.b, params.A, params.B))
     rho_before = spectral_radius(A, B)
     if cfg.stability.max_spectral_radius is not None:
         A = project_spectrum(A, B, cfg.stability.max_spectral_radius)
@@ -228,42 +203,67 @@ def train(
     )
 
 
-class AdamW:
-    """AdamW (Loshchilov & Hutter 2019, Algorithm 2) in a few tensor operations per parameter.
+class _Draws:
+    """The random draws of each step, made in blocks: batch indices (reshuffled each epoch), divergence
+    points and target noise (standard normal, ``(batch, d)``)."""
 
-    The same update as ``torch.optim.AdamW`` (betas 0.9/0.999, eps 1e-8, decoupled weight decay), without
-    its per-step dispatch and first-use compiler import, which cost more than the math at these sizes.
-    """
+    BLOCK = 256  # steps per block
 
-    def __init__(
-        self,
-        params: list[torch.nn.Parameter],
-        lr: float,
-        weight_decay: float,
-        betas: tuple[float, float] = (0.9, 0.999),
-        eps: float = 1e-8,
-    ) -> None:
-        self.params, self.lr, self.wd, self.betas, self.eps = params, lr, weight_decay, betas, eps
-        self.m = [torch.zeros_like(p) for p in params]
-        self.v = [torch.zeros_like(p) for p in params]
-        self.t = 0
+    def __init__(self, rng, gen, n_pairs: int, batch: int, div_points: int, dim: int, dtype) -> None:
+        self.rng, self.gen, self.n, self.batch, self.m, self.dim, self.dtype = (
+            rng,
+            gen,
+            n_pairs,
+            batch,
+            div_points,
+            dim,
+            dtype,
+        )
+        self.order, self.cursor = rng.permutation(n_pairs), 0
+        self.pos = self.BLOCK
 
-    def zero_grad(self) -> None:
-        for p in self.params:
-            p.grad = None
+    def _refill(self) -> None:
+        idx = np.empty((self.BLOCK, self.batch), dtype=np.int64)
+        for j in range(self.BLOCK):
+            if self.cursor + self.batch > self.n:  # a new epoch: reshuffle
+                self.order, self.cursor = self.rng.permutation(self.n), 0
+            idx[j] = self.order[self.cursor : self.cursor + self.batch]
+            self.cursor += self.batch
+        self.idx = torch.as_tensor(idx)
+        self.div = torch.as_tensor(self.rng.integers(0, self.n, size=(self.BLOCK, self.m)))
+        self.noise = torch.randn((self.BLOCK, self.batch, self.dim), generator=self.gen, dtype=self.dtype)
+        self.pos = 0
 
-    @torch.no_grad()
-    def step(self, lr_scale: float = 1.0) -> None:
-        self.t += 1
-        b1, b2 = self.betas
-        lr = self.lr * lr_scale
-        c1, c2 = 1.0 - b1**self.t, 1.0 - b2**self.t
-        for p, m, v in zip(self.params, self.m, self.v, strict=True):
-            g = p.grad
-            p.mul_(1.0 - lr * self.wd)
-            m.mul_(b1).add_(g, alpha=1.0 - b1)
-            v.mul_(b2).addcmul_(g, g, value=1.0 - b2)
-            p.addcdiv_(m, (v / c2).sqrt_().add_(self.eps), value=-lr / c1)
+    def next(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        if self.pos == self.BLOCK:
+            self._refill()
+        j = self.pos
+        self.pos += 1
+        return self.idx[j], self.div[j], self.noise[j]
+
+
+def _multistep_into(
+    params: FlatParams, model: FourierKoopman, win, rng, batch: int, weight: float, terms
+) -> torch.Tensor:
+    """Add ``weight`` x the multi-step loss's gradient (by autograd) to ``params.grad``; return the weighted term."""
+    wb = win[torch.as_tensor(rng.integers(0, win.shape[0], size=min(batch, win.shape[0])))]
+    with torch.enable_grad():
+        for t in model.parameters():
+            t.grad = None
+        loss_m = multistep_loss(model, wb)
+        (weight * loss_m).backward()
+    for t, g in zip((model.W, model.b, model.A, model.B), (params.gW, params.gb, params.gA, params.gB), strict=True):
+        g.add_(t.grad)
+    terms["multistep"] = loss_m.detach()
+    return weight * loss_m.detach()
+
+
+def _check_finite(losses: torch.Tensor, k: int) -> None:
+    """Raise if any loss up to step ``k`` is not finite, naming the first such step."""
+    bad = ~torch.isfinite(losses[:k])
+    if bool(bad.any()):
+        first = int(torch.nonzero(bad)[0, 0])
+        raise FloatingPointError(f"training diverged at step {first + 1}: loss {losses[first].item()}")
 
 
 def spectral_radius(A: np.ndarray, B: np.ndarray) -> float:
