@@ -75,47 +75,47 @@ def loss_and_gradient(
     goal = goal.reshape(1, d)
     with_goal_row = not goal_centred and w.goal > 0
     X = torch.cat([x, y, goal, pts])  # (2n + 1 + m, d): one phase computation for every use
-    phase = torch.addmm(p.b, X, p.W.T).mul_(TWO_PI)  # 2 pi (W x + b)
+    phase = torch.addmm(p.b, X, p.W.T, beta=TWO_PI, alpha=TWO_PI)  # 2 pi (W x + b)
     cos, sin = torch.cos(phase), torch.sin(phase)
-    feats = cos[: 2 * n + 1] * c  # c cos(...) at x, y and g
     # lifted pairs, with the goal (when it has a loss of its own) as one more pair g -> g
-    if goal_centred:
-        z = torch.cat([X[: 2 * n] - goal, feats[: 2 * n] - feats[2 * n]], dim=1)  # Phi = Psi - Psi(g)
+    if goal_centred:  # Phi = Psi - Psi(g)
+        z = torch.empty((2 * n, D), dtype=x.dtype)
+        torch.sub(X[: 2 * n], goal, out=z[:, :d])
+        torch.sub(cos[: 2 * n], cos[2 * n], out=z[:, d:]).mul_(c)
         zx, zy = z[:n], z[n:]
     else:
-        z = torch.cat([X[: 2 * n + 1], feats], dim=1)
+        z = torch.cat([X[: 2 * n + 1], cos[: 2 * n + 1] * c], dim=1)
         rows = torch.arange(n + 1 if with_goal_row else n)
         zx = z[torch.where(rows < n, rows, 2 * n)]
         zy = z[torch.where(rows < n, rows + n, 2 * n)]
     U = zx @ p.B  # (n', r)
     R = torch.addmm(zy, U, p.A.T, alpha=-1.0)  # residual Phi(y) - K Phi(x)
     # dL/dR: the Koopman term on every coordinate, the state term on the first d of the pair rows
-    row_w = torch.full((zx.shape[0], 1), 2.0 * w.koopman / (n * D), dtype=x.dtype)
+    G = R * (2.0 * w.koopman / (n * D))
     if with_goal_row:
-        row_w[n] = 2.0 * w.goal / D
-    G = R * row_w
+        torch.mul(R[n], 2.0 * w.goal / D, out=G[n])
     G[:n, :d] += (2.0 * w.state / (n * d)) * R[:n, :d]
-    sq = R * R
-    terms = {"koopman": sq[:n].sum() / (n * D), "state": sq[:n, :d].sum() / (n * d)}
+    R_pairs = R[:n].reshape(-1)
+    terms = {"koopman": torch.dot(R_pairs, R_pairs) / (n * D), "state": (R[:n, :d] ** 2).sum() / (n * d)}
     if with_goal_row:
-        terms["goal"] = sq[n].sum() / D
-    # back through R = zy - (zx B) A^T
-    torch.mm(G.T, U, out=p.gA).neg_()
+        terms["goal"] = torch.dot(R[n], R[n]) / D
+    # back through R = zy - (zx B) A^T, with V = -dL/d(zx B)
+    U.neg_()
+    torch.mm(G.T, U, out=p.gA)
     V = G @ p.A  # (n', r)
-    torch.mm(zx.T, V, out=p.gB).neg_()
-    dzx = V @ p.B[d:].T  # minus dL/dzx, feature columns only
-    # dL/dfeats at x, y (and g), then through feats = c cos(phase)
-    dfeat = torch.empty((2 * n + 1, nu), dtype=x.dtype)
-    torch.neg(dzx[:n], out=dfeat[:n])
-    dfeat[n : 2 * n] = G[:n, d:]
-    if goal_centred:
-        dfeat[2 * n] = -dfeat[: 2 * n].sum(dim=0)
-    elif with_goal_row:
-        dfeat[2 * n] = G[n, d:] - dzx[n]
-    else:
-        dfeat[2 * n] = 0.0
+    V.neg_()
+    torch.mm(zx.T, V, out=p.gB)
+    dzx = V @ p.B[d:].T  # dL/dzx, feature columns only
+    # through z = c cos(phase) [- c cos(phase_g)]; the common factor -c is applied to gW and gb at the end
     dphase = torch.empty_like(phase)
-    torch.mul(sin[: 2 * n + 1], dfeat, out=dphase[: 2 * n + 1]).mul_(-c)
+    torch.mul(sin[:n], dzx[:n], out=dphase[:n])
+    torch.mul(sin[n : 2 * n], G[:n, d:], out=dphase[n : 2 * n])
+    if goal_centred:  # Psi(g) enters every lifted pair with a minus sign
+        torch.mul(sin[2 * n], dzx[:n].sum(dim=0).add_(G[:n, d:].sum(dim=0)), out=dphase[2 * n]).neg_()
+    elif with_goal_row:
+        torch.mul(sin[2 * n], G[n, d:] + dzx[n], out=dphase[2 * n])
+    else:
+        dphase[2 * n] = 0.0
     # divergence: trace(df/dx) = trace(A_x B_x^T) + s . q, s = -2 pi c sin(phase), q_j = sum_i (B_f A_x^T)_ji W_ji
     A_x, B_x, B_f = p.A[:d], p.B[:d], p.B[d:]
     Mq = B_f @ A_x.T  # (nu, d)
@@ -125,17 +125,17 @@ def loss_and_gradient(
     t = trace - d if w.divergence_of is DivergenceOf.FIELD else trace
     terms["divergence"] = (t * t).mean()
     e = (2.0 * w.divergence / m) * t  # dL/dtrace
-    e_sum = e.sum()
+    e_sum = e.sum().item()
     h = s.T @ e  # dL/dq (nu,)
-    torch.outer(e, q, out=dphase[2 * n + 1 :]).mul_(cos[2 * n + 1 :]).mul_(-TWO_PI * c)
+    torch.outer(e * TWO_PI, q, out=dphase[2 * n + 1 :]).mul_(cos[2 * n + 1 :])  # ds/dphase = -2 pi c cos
     p.gA[:d].add_(B_x, alpha=e_sum)
     p.gB[:d].add_(A_x, alpha=e_sum)
     hW = h[:, None] * p.W  # dL/dMq
     p.gB[d:].addmm_(hW, A_x)
     p.gA[:d].addmm_(hW.T, B_f)
-    # through phase = 2 pi (X W^T + b)
-    p.gW.copy_((X.T @ dphase).T).mul_(TWO_PI).addcmul_(h[:, None], Mq)  # X^T dphase: the fast layout
-    torch.sum(dphase, dim=0, out=p.gb).mul_(TWO_PI)
+    # through phase = 2 pi (X W^T + b), with the factor -c left over from above
+    p.gW.copy_((X.T @ dphase).T).mul_(-TWO_PI * c).addcmul_(h[:, None], Mq)  # X^T dphase: the fast layout
+    torch.sum(dphase, dim=0, out=p.gb).mul_(-TWO_PI * c)
     loss = w.koopman * terms["koopman"] + w.state * terms["state"] + w.divergence * terms["divergence"]
     if with_goal_row:
         loss = loss + w.goal * terms["goal"]

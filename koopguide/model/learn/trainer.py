@@ -119,7 +119,7 @@ def train(
     """Fit a flow field to ``demos``; deterministic for a given ``seed`` (and thread count)."""
     if cfg.threads > 0:
         torch.set_num_threads(cfg.threads)
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), time.process_time()
     gen = torch.Generator().manual_seed(seed)
     rng = np.random.default_rng(seed)
     dtype = torch.float32
@@ -147,13 +147,12 @@ def train(
 
     n_pairs = x.shape[0]
     batch = min(cfg.optim.batch_size, n_pairs)
-    draws = _Draws(rng, gen, n_pairs, batch, cfg.loss.divergence_points, demos.dim, dtype)
+    draws = _Draws(rng, gen, x, y, noisy, noise_sigma, batch, cfg.loss.divergence_points)
     losses = torch.empty(steps, dtype=dtype)
     with torch.no_grad():
         for k in range(1, steps + 1):
-            idx, div_idx, noise = draws.next()
-            yb = torch.addcmul(y[idx], noise * noise_sigma, noisy[idx])
-            loss, terms_t = loss_and_gradient(params, goal_t, cfg.model.goal_centred, x[idx], yb, x[div_idx], weights)
+            xb, yb, pts = draws.next()
+            loss, terms_t = loss_and_gradient(params, goal_t, cfg.model.goal_centred, xb, yb, pts, weights)
             if win is not None:
                 loss = loss + _multistep_into(params, model, win, rng, batch, cfg.loss.multistep, terms_t)
             cosine = cfg.optim.schedule is LRSchedule.COSINE
@@ -169,7 +168,7 @@ def train(
     rho_before = spectral_radius(A, B)
     if cfg.stability.max_spectral_radius is not None:
         A = project_spectrum(A, B, cfg.stability.max_spectral_radius)
-    fit_seconds = time.perf_counter() - started
+    fit_seconds, fit_cpu = time.perf_counter() - started, time.process_time() - cpu_started
     limit, cert, limited = None, None, None
     if cfg.convergence is not None:
         raw = FlowField(W, b, A, B, demos.goal, cfg.model.goal_centred, cfg.subsample_every)
@@ -182,6 +181,8 @@ def train(
         "pairs": int(n_pairs),
         "fit_seconds": fit_seconds,
         "certify_seconds": time.perf_counter() - started - fit_seconds,
+        "fit_cpu_seconds": fit_cpu,  # this process's CPU time: the figure a busy machine does not inflate
+        "certify_cpu_seconds": time.process_time() - cpu_started - fit_cpu,
         "train_seconds": time.perf_counter() - started,
         "final_koopman_loss": final_k,
         "rho_trained": rho_before,
@@ -204,22 +205,16 @@ def train(
 
 
 class _Draws:
-    """The random draws of each step, made in blocks: batch indices (reshuffled each epoch), divergence
-    points and target noise (standard normal, ``(batch, d)``)."""
+    """Each step's batch, made in blocks of steps: pairs (reshuffled each epoch), their targets with noise
+    (standard normal x ``noise_sigma``, not on a demonstration's last pair) and the divergence points."""
 
     BLOCK = 256  # steps per block
 
-    def __init__(self, rng, gen, n_pairs: int, batch: int, div_points: int, dim: int, dtype) -> None:
-        self.rng, self.gen, self.n, self.batch, self.m, self.dim, self.dtype = (
-            rng,
-            gen,
-            n_pairs,
-            batch,
-            div_points,
-            dim,
-            dtype,
-        )
-        self.order, self.cursor = rng.permutation(n_pairs), 0
+    def __init__(self, rng, gen, x, y, noisy, noise_sigma: float, batch: int, div_points: int) -> None:
+        self.rng, self.gen, self.x, self.y, self.noisy = rng, gen, x, y, noisy
+        self.noise_sigma, self.batch, self.m = noise_sigma, batch, div_points
+        self.n = x.shape[0]
+        self.order, self.cursor = rng.permutation(self.n), 0
         self.pos = self.BLOCK
 
     def _refill(self) -> None:
@@ -229,17 +224,20 @@ class _Draws:
                 self.order, self.cursor = self.rng.permutation(self.n), 0
             idx[j] = self.order[self.cursor : self.cursor + self.batch]
             self.cursor += self.batch
-        self.idx = torch.as_tensor(idx)
-        self.div = torch.as_tensor(self.rng.integers(0, self.n, size=(self.BLOCK, self.m)))
-        self.noise = torch.randn((self.BLOCK, self.batch, self.dim), generator=self.gen, dtype=self.dtype)
+        idx_t = torch.as_tensor(idx)
+        noise = torch.randn((self.BLOCK, self.batch, self.x.shape[1]), generator=self.gen, dtype=self.x.dtype)
+        self.xb = self.x[idx_t]
+        self.yb = torch.addcmul(self.y[idx_t], noise, self.noisy[idx_t], value=self.noise_sigma)
+        self.pts = self.x[torch.as_tensor(self.rng.integers(0, self.n, size=(self.BLOCK, self.m)))]
         self.pos = 0
 
     def next(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(x (batch, d), y (batch, d), divergence points (m, d))`` of the next step."""
         if self.pos == self.BLOCK:
             self._refill()
         j = self.pos
         self.pos += 1
-        return self.idx[j], self.div[j], self.noise[j]
+        return self.xb[j], self.yb[j], self.pts[j]
 
 
 def _multistep_into(
