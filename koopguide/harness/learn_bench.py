@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
         f"over {len(times)} runs; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
     )
     print(
-        f"           CPU time (what other jobs on the machine do not inflate): fit median "
+        f"           CPU time (other jobs inflate it less than wall time): fit median "
         f"{figures['fit_cpu_seconds_median']:.2f} s, certify-and-repair median "
         f"{figures['certify_cpu_seconds_median']:.2f} s"
     )

@@ -181,7 +181,7 @@ def train(
         "pairs": int(n_pairs),
         "fit_seconds": fit_seconds,
         "certify_seconds": time.perf_counter() - started - fit_seconds,
-        "fit_cpu_seconds": fit_cpu,  # this process's CPU time: the figure a busy machine does not inflate
+        "fit_cpu_seconds": fit_cpu,  # this process's CPU time: other jobs inflate it less than wall time
         "certify_cpu_seconds": time.process_time() - cpu_started - fit_cpu,
         "train_seconds": time.perf_counter() - started,
         "final_koopman_loss": final_k,
