@@ -50,6 +50,19 @@ def _summary(rows: list[dict], label: str) -> dict:
     }  # fmt: skip
 
 
+def _cpu_sentence(meta: dict) -> str:
+    """The default runs' own CPU time: what they cost without other jobs, whatever the load."""
+    cpu = meta.get("main_cpu_seconds")
+    if cpu is None:
+        return ""
+    per = cpu / max(1, len(meta["shapes"]) * len(meta["seeds"]))
+    return (
+        f"The default runs themselves used {cpu:.0f} CPU-seconds ({per:.1f} s per shape and seed for train, "
+        f"certify and evaluate), i.e. about {cpu / meta['workers']:.0f} s of wall time on {meta['workers']} "
+        "otherwise idle cores, plus the workers' start-up."
+    )
+
+
 def write_report(out: Path, rows: list[dict], meta: dict, models: Path | None) -> None:
     labels = list(dict.fromkeys(r["label"] for r in rows))
     summaries = {label: _summary(rows, label) for label in labels}
@@ -61,7 +74,7 @@ def write_report(out: Path, rows: list[dict], meta: dict, models: Path | None) -
         f"{len(meta['ablation_shapes'])} shapes; {meta['workers']} worker processes on {meta['cpus']} cores. "
         f"Wall time: default runs {meta['main_wall_seconds']:.0f} s, everything {meta['wall_seconds']:.0f} s "
         f"(load average at the end {', '.join(f'{v:.1f}' for v in meta['load_average'])}: the machine was "
-        "shared with other jobs).",
+        f"shared with other jobs). {_cpu_sentence(meta)}",
         "",
         "Convergence: 500 uniform random starts from the demonstrations' box with each side moved out by 10%, "
         "within 1 unit of the goal after 100 learned steps (`learned`) and after 100 x 40 Euler steps of "

@@ -134,10 +134,17 @@ def certify_detail(
     tolerance: float,
     learned_steps: int,
     fixed_point_tolerance: float,
+    learned_run: tuple[np.ndarray, int] | None = None,
 ) -> tuple[dict, np.ndarray]:
-    """:func:`certify` and the starts ``(M, d)`` that failed either integrator (for repairs)."""
+    """:func:`certify` and the starts ``(M, d)`` that failed either integrator (for repairs).
+
+    ``learned_run``: the learned-step integrator's ``run_to_goal`` result on this field and grid, if
+    already computed (it is deterministic, so it is not run twice).
+    """
     X0 = grid_starts(lo, hi, per_axis)
-    end_l, taken_l = run_to_goal(field, X0, "learned", learned_steps, tolerance)
+    if learned_run is None:
+        learned_run = run_to_goal(field, X0, "learned", learned_steps, tolerance)
+    end_l, taken_l = learned_run
     end_e, taken_e = run_to_goal(field, X0, "euler", learned_steps, tolerance)
     learned, euler = outcome(end_l, taken_l, tolerance), outcome(end_e, taken_e, tolerance)
     failing = X0[(end_l > tolerance) | (end_e > tolerance)]
@@ -290,13 +297,16 @@ def certify_and_repair(
     for attempt in range(cfg.repairs + 2):
         limited = limited.with_limit(limit)
         final = attempt == cfg.repairs + 1
+        learned_run = None
         if not final:  # the cheap integrator first: no need to run Euler on a limit about to be repaired
-            end, _ = run_to_goal(limited, X0, "learned", cfg.learned_steps, cfg.tolerance)
-            failing = X0[end > cfg.tolerance]
+            learned_run = run_to_goal(limited, X0, "learned", cfg.learned_steps, cfg.tolerance)
+            failing = X0[learned_run[0] > cfg.tolerance]
             if len(failing):
                 rounds.append({"learned": int(len(X0) - len(failing)), "euler": None})
         if final or not len(failing):
-            cert, failing = certify_detail(limited, lo_c, hi_c, per_axis_c, cfg.tolerance, cfg.learned_steps, 0.01)
+            cert, failing = certify_detail(
+                limited, lo_c, hi_c, per_axis_c, cfg.tolerance, cfg.learned_steps, 0.01, learned_run
+            )
             rounds.append({"learned": cert["learned"]["converged"], "euler": cert["euler"]["converged"]})
             if cert["passed"] or final:
                 break

@@ -34,33 +34,42 @@ def swept_error_area(demo: np.ndarray, rep: np.ndarray) -> float:
 
 def dtw_distance(a: np.ndarray, b: np.ndarray) -> float:
     """DTWD: ``D(i,j) = |a_i - b_j| + min(D(i-1,j), D(i,j-1), D(i-1,j-1))``, ``D(0,0) = |a_0 - b_0|``,
-    the result ``D(n,m)`` summed along the path, not normalised (dtw-python's ``symmetric1``).
-
-    Computed by anti-diagonals so each sweep is one vectorised numpy operation.
-    """
+    the result ``D(n,m)`` summed along the path, not normalised (dtw-python's ``symmetric1``)."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1] or len(a) == 0 or len(b) == 0:
         raise ValueError(f"DTW needs two non-empty (T, d) arrays of one dimension, got {a.shape} and {b.shape}")
-    n, m = len(a), len(b)
-    cost = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
+    return float(dtw_distances(a[None], b[None])[0])
+
+
+def dtw_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`dtw_distance` of ``P`` pairs at once: ``a (P, n, d)``, ``b (P, m, d)`` -> ``(P,)``.
+
+    Computed by anti-diagonals (cells with ``i + j = k``), each one vectorised numpy operation over
+    the pairs and the diagonal; costs are formed per diagonal, never as a full ``n x m`` matrix.
+    """
+    a = np.moveaxis(np.asarray(a, dtype=np.float64), 2, 0)  # (d, P, n): contiguous slices per coordinate
+    b = np.moveaxis(np.asarray(b, dtype=np.float64), 2, 0)
+    a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
+    _, pairs, n = a.shape
+    m = b.shape[2]
     inf = np.inf
-    # prev2, prev1 hold diagonals k-2 and k-1 indexed by row i (length n); out-of-range cells are inf.
-    prev2 = np.full(n, inf)
-    prev1 = np.full(n, inf)
-    prev1[0] = cost[0, 0]
-    rows = np.arange(n)
+    # D on diagonals k-2 and k-1, indexed by row i + 1 (column 0 is an always-infinite sentinel for i = -1)
+    prev2 = np.full((pairs, n + 1), inf)
+    prev1 = np.full((pairs, n + 1), inf)
+    prev1[:, 1] = np.sqrt(np.sum((a[:, :, 0] - b[:, :, 0]) ** 2, axis=0))
     for k in range(1, n + m - 1):
-        lo, hi = max(0, k - m + 1), min(n - 1, k)
-        i = rows[lo : hi + 1]
-        j = k - i
-        up = np.where(i >= 1, prev1[np.maximum(i - 1, 0)], inf)  # D(i-1, j)
-        left = np.where(j >= 1, prev1[i], inf)  # D(i, j-1): same row on diagonal k-1
-        diag = np.where((i >= 1) & (j >= 1), prev2[np.maximum(i - 1, 0)], inf)  # D(i-1, j-1)
-        cur = np.full(n, inf)
-        cur[i] = cost[i, j] + np.minimum(np.minimum(up, left), diag)
+        lo, hi = max(0, k - m + 1), min(n - 1, k)  # rows on this diagonal; column j = k - i
+        sq = None
+        for ac, bc in zip(a, b, strict=True):
+            diff = ac[:, lo : hi + 1] - bc[:, k - hi : k - lo + 1][:, ::-1]
+            sq = diff * diff if sq is None else sq + diff * diff
+        best = np.minimum(prev1[:, lo : hi + 1], prev1[:, lo + 1 : hi + 2])  # D(i-1, j), D(i, j-1)
+        np.minimum(best, prev2[:, lo : hi + 1], out=best)  # D(i-1, j-1)
+        cur = np.full((pairs, n + 1), inf)
+        cur[:, lo + 1 : hi + 2] = np.sqrt(sq) + best
         prev2, prev1 = prev1, cur
-    return float(prev1[n - 1])
+    return prev1[:, n].copy()
 
 
 def reproduce(field: FlowField, demos: Demonstrations) -> list[np.ndarray]:
@@ -132,7 +141,10 @@ def evaluate(
     """All metrics as plain data (the JSON of ``koopguide eval --json``)."""
     reps = reproduce(field, demos)
     sea = [swept_error_area(d, r) for d, r in zip(demos.trajectories, reps, strict=True)] if field.dim == 2 else []
-    dtwd = [dtw_distance(d, r) for d, r in zip(demos.trajectories, reps, strict=True)]
+    if len({t.shape for t in demos.trajectories}) == 1:  # one batched sweep (LASA: equal lengths)
+        dtwd = dtw_distances(np.stack(demos.trajectories), np.stack(reps)).tolist()
+    else:
+        dtwd = [dtw_distance(d, r) for d, r in zip(demos.trajectories, reps, strict=True)]
     box = convergence_box(demos.bounds, enlarge)
     conv = convergence(field, box, starts, steps, tolerance, seed)
     conv_e = convergence(field, box, starts, steps, tolerance, seed, integrator="euler")

@@ -303,14 +303,30 @@ def _query_table(field: FlowField, limit: RatioLimit, f_values: np.ndarray | Non
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, field.dim)
     values = np.empty((len(nodes), field.dim + 1))
     reuse = f_values is not None and f_values.shape[: field.dim] == fine
-    if reuse:
-        values[:, : field.dim] = f_values.reshape(-1, field.dim)
+    values[:, : field.dim] = f_values.reshape(-1, field.dim) if reuse else learned_step_on_grid(field, axes)
     for i in range(0, len(nodes), 8192):
-        chunk = nodes[i : i + 8192]
-        if not reuse:
-            values[i : i + 8192, : field.dim] = field.learned_step(chunk)
-        values[i : i + 8192, field.dim] = limit.ratio(chunk)
+        values[i : i + 8192, field.dim] = limit.ratio(nodes[i : i + 8192])
     return GridTable(limit.lo, limit.hi, values.reshape(*fine, field.dim + 1))
+
+
+def learned_step_on_grid(field: FlowField, axes: list[np.ndarray]) -> np.ndarray:
+    """``f(x)`` at every node of the grid ``axes[0] x ... x axes[d-1]`` in float64, ``(prod(n_k), d)`` in C order.
+
+    The phases separate over the axes, ``2 pi (W x + b) = 2 pi b + sum_k 2 pi W_k x_k``, so with
+    ``E_k = exp(i 2 pi W_k x_k)`` the Fourier part ``sum_j C_j cos(phase_j)`` is ``Re(F @ E_last^T)`` where
+    ``F`` holds ``C_j exp(i 2 pi b_j) prod_{k < d-1} E_k`` for every combination of the other axes: two
+    real matrix products instead of ``nu`` cosines per node.
+    """
+    d = field.dim
+    front = np.exp(1j * field._two_pi_b)[None, :]  # (1, nu), then (n_0 ... n_{d-2}, nu)
+    for k in range(d - 1):
+        front = (front[:, None, :] * np.exp(1j * np.outer(axes[k], field._two_pi_W_T[k]))[None]).reshape(-1, field.nu)
+    last = np.exp(1j * np.outer(axes[-1], field._two_pi_W_T[d - 1]))  # (n_last, nu)
+    weighted = (front[:, None, :] * field._cBA_f.T[None]).reshape(-1, field.nu)  # (rows * d, nu)
+    fourier = weighted.real @ last.real.T - weighted.imag @ last.imag.T  # (rows * d, n_last)
+    fourier = fourier.reshape(len(front), d, len(last)).transpose(0, 2, 1).reshape(-1, d)
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
+    return nodes @ field._BA_x + fourier + field._offset
 
 
 def _positive_int(value: Any, name: str) -> int:

@@ -243,3 +243,24 @@ def test_non_float_weights_are_refused(tmp_path, saved):
     path = _with_weight(tmp_path, saved, "b", torch.zeros(256, dtype=torch.int64))
     with pytest.raises(ModelFileError, match="weight b has dtype int64, expected floating point"):
         koopguide.load_field(path)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_learned_step_on_a_grid_by_separable_phases_equals_the_pointwise_float64_map(dim):
+    from koopguide.model.field import learned_step_on_grid
+
+    rng = np.random.default_rng(dim)
+    nu, rank = 96, 8
+    field = koopguide.FlowField(
+        rng.normal(scale=0.3, size=(nu, dim)),
+        rng.normal(size=nu),
+        rng.normal(scale=0.2, size=(nu + dim, rank)),
+        rng.normal(scale=0.2, size=(nu + dim, rank)),
+        goal=rng.normal(size=dim),
+        goal_centred=True,
+        substeps=40,
+        precision="float64",
+    )
+    axes = [np.linspace(-20.0 + k, 15.0 - k, 7 + 2 * k) for k in range(dim)]
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dim)
+    np.testing.assert_allclose(learned_step_on_grid(field, axes), field.learned_step(nodes), rtol=0, atol=1e-10)

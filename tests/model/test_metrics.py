@@ -82,3 +82,13 @@ def test_convergence_box_moves_each_side_out_by_ten_percent_about_the_centre():
     lo, hi = convergence_box((np.array([-40.0, 0.0]), np.array([0.0, 50.0])), 0.10)
     np.testing.assert_allclose(hi - lo, [48.0, 60.0])
     np.testing.assert_allclose((hi + lo) / 2, [-20.0, 25.0])
+
+
+def test_batched_dtw_equals_dtw_python_pair_by_pair():
+    from koopguide.model.evaluate import dtw_distances
+
+    rng = np.random.default_rng(4)
+    for n, m in ((1, 5), (9, 4), (30, 30)):
+        a, b = rng.normal(size=(3, n, 2)).cumsum(axis=1), rng.normal(size=(3, m, 2)).cumsum(axis=1)
+        expected = [dtw_python(x, y, step_pattern="symmetric1").distance for x, y in zip(a, b, strict=True)]
+        np.testing.assert_allclose(dtw_distances(a, b), expected, rtol=1e-12)

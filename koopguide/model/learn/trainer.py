@@ -20,14 +20,8 @@ from koopguide.base import data as demo_data
 from koopguide.base.config import Range
 from koopguide.model.certificate import FunnelSettings, certify_and_repair
 from koopguide.model.field import FlowField
-from koopguide.model.learn.losses import (
-    DivergenceOf,
-    divergence_loss,
-    goal_loss,
-    koopman_loss,
-    multistep_loss,
-    pair_losses,
-)
+from koopguide.model.learn.gradients import AdamW, FlatParams, LossWeights, loss_and_gradient
+from koopguide.model.learn.losses import DivergenceOf, koopman_loss, multistep_loss
 from koopguide.model.learn.model import FourierKoopman
 from koopguide.model.lyapunov import RatioLimit
 
@@ -125,7 +119,7 @@ def train(
     """Fit a flow field to ``demos``; deterministic for a given ``seed`` (and thread count)."""
     if cfg.threads > 0:
         torch.set_num_threads(cfg.threads)
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), time.process_time()
     gen = torch.Generator().manual_seed(seed)
     rng = np.random.default_rng(seed)
     dtype = torch.float32
@@ -143,58 +137,38 @@ def train(
 
     goal = torch.as_tensor(demos.goal, dtype=torch.float64)
     model = FourierKoopman(demos.dim, cfg.model.nu, cfg.model.rank, goal, cfg.model.goal_centred, gen).to(dtype)
+    params = FlatParams(*(t.detach() for t in (model.W, model.b, model.A, model.B)))
+    for t, view in zip((model.W, model.b, model.A, model.B), (params.W, params.b, params.A, params.B), strict=True):
+        t.data = view  # the module reads the flat parameters (the multi-step term's autograd path)
+    goal_t = model.goal
+    weights = LossWeights(cfg.loss.koopman, cfg.loss.state, cfg.loss.divergence, cfg.loss.goal, cfg.loss.divergence_of)
     steps = cfg.optim.steps
-    opt = AdamW(list(model.parameters()), cfg.optim.lr, cfg.optim.weight_decay)
+    opt = AdamW(params.flat, cfg.optim.lr, cfg.optim.weight_decay)
 
     n_pairs = x.shape[0]
     batch = min(cfg.optim.batch_size, n_pairs)
-    order = rng.permutation(n_pairs)
-    cursor = 0
-    terms: dict[str, float] = {}
-    for k in range(1, steps + 1):
-        if cursor + batch > n_pairs:  # a new epoch: reshuffle
-            order, cursor = rng.permutation(n_pairs), 0
-        idx = torch.as_tensor(order[cursor : cursor + batch])
-        cursor += batch
-        xb = x[idx]
-        yb = y[idx] + noise_sigma * torch.randn((batch, demos.dim), generator=gen, dtype=dtype) * noisy[idx]
-        loss_k, loss_s = pair_losses(model, xb, yb)
-        loss = cfg.loss.koopman * loss_k + cfg.loss.state * loss_s
-        pts = x[torch.as_tensor(rng.integers(0, n_pairs, size=cfg.loss.divergence_points))]
-        loss_d = divergence_loss(model, pts, cfg.loss.divergence_of)
-        loss = loss + cfg.loss.divergence * loss_d
-        if not cfg.model.goal_centred and cfg.loss.goal > 0:
-            loss_g = goal_loss(model)
-            loss = loss + cfg.loss.goal * loss_g
-        else:
-            loss_g = None
-        if win is not None:
-            wb = win[torch.as_tensor(rng.integers(0, win.shape[0], size=min(batch, win.shape[0])))]
-            loss_m = multistep_loss(model, wb)
-            loss = loss + cfg.loss.multistep * loss_m
-        else:
-            loss_m = None
-        opt.zero_grad()
-        loss.backward()
-        cosine = cfg.optim.schedule is LRSchedule.COSINE
-        opt.step(0.5 * (1.0 + math.cos(math.pi * (k - 1) / steps)) if cosine else 1.0)
-        if not math.isfinite(loss.item()):
-            raise FloatingPointError(f"training diverged at step {k}: loss {loss.item()}")
-        if progress is not None and (k % progress_every == 0 or k == steps):
-            terms = {"loss": loss.item(), "koopman": loss_k.item(), "state": loss_s.item(), "divergence": loss_d.item()}
-            if loss_g is not None:
-                terms["goal"] = loss_g.item()
-            if loss_m is not None:
-                terms["multistep"] = loss_m.item()
-            progress(k, steps, terms)
-
+    draws = _Draws(rng, gen, x, y, noisy, noise_sigma, batch, cfg.loss.divergence_points)
+    losses = torch.empty(steps, dtype=dtype)
     with torch.no_grad():
+        for k in range(1, steps + 1):
+            xb, yb, pts = draws.next()
+            loss, terms_t = loss_and_gradient(params, goal_t, cfg.model.goal_centred, xb, yb, pts, weights)
+            if win is not None:
+                loss = loss + _multistep_into(params, model, win, rng, batch, cfg.loss.multistep, terms_t)
+            cosine = cfg.optim.schedule is LRSchedule.COSINE
+            opt.step(params.grad, 0.5 * (1.0 + math.cos(math.pi * (k - 1) / steps)) if cosine else 1.0)
+            losses[k - 1] = loss
+            if k % 100 == 0 or k == steps:
+                _check_finite(losses, k)
+            if progress is not None and (k % progress_every == 0 or k == steps):
+                progress(k, steps, {"loss": loss.item(), **{name: v.item() for name, v in terms_t.items()}})
+
         final_k = koopman_loss(model, x, y).item()
-    W, b, A, B = (p.detach().to(torch.float64).numpy().copy() for p in (model.W, model.b, model.A, model.B))
+    W, b, A, B = (t.to(torch.float64).numpy().copy() for t in (params.W, params.b, params.A, params.B))
     rho_before = spectral_radius(A, B)
     if cfg.stability.max_spectral_radius is not None:
         A = project_spectrum(A, B, cfg.stability.max_spectral_radius)
-    fit_seconds = time.perf_counter() - started
+    fit_seconds, fit_cpu = time.perf_counter() - started, time.process_time() - cpu_started
     limit, cert, limited = None, None, None
     if cfg.convergence is not None:
         raw = FlowField(W, b, A, B, demos.goal, cfg.model.goal_centred, cfg.subsample_every)
@@ -207,6 +181,8 @@ def train(
         "pairs": int(n_pairs),
         "fit_seconds": fit_seconds,
         "certify_seconds": time.perf_counter() - started - fit_seconds,
+        "fit_cpu_seconds": fit_cpu,  # this process's CPU time: other jobs inflate it less than wall time
+        "certify_cpu_seconds": time.process_time() - cpu_started - fit_cpu,
         "train_seconds": time.perf_counter() - started,
         "final_koopman_loss": final_k,
         "rho_trained": rho_before,
@@ -228,42 +204,64 @@ def train(
     )
 
 
-class AdamW:
-    """AdamW (Loshchilov & Hutter 2019, Algorithm 2) in a few tensor operations per parameter.
+class _Draws:
+    """Each step's batch, made in blocks of steps: pairs (reshuffled each epoch), their targets with noise
+    (standard normal x ``noise_sigma``, not on a demonstration's last pair) and the divergence points."""
 
-    The same update as ``torch.optim.AdamW`` (betas 0.9/0.999, eps 1e-8, decoupled weight decay), without
-    its per-step dispatch and first-use compiler import, which cost more than the math at these sizes.
-    """
+    BLOCK = 256  # steps per block
 
-    def __init__(
-        self,
-        params: list[torch.nn.Parameter],
-        lr: float,
-        weight_decay: float,
-        betas: tuple[float, float] = (0.9, 0.999),
-        eps: float = 1e-8,
-    ) -> None:
-        self.params, self.lr, self.wd, self.betas, self.eps = params, lr, weight_decay, betas, eps
-        self.m = [torch.zeros_like(p) for p in params]
-        self.v = [torch.zeros_like(p) for p in params]
-        self.t = 0
+    def __init__(self, rng, gen, x, y, noisy, noise_sigma: float, batch: int, div_points: int) -> None:
+        self.rng, self.gen, self.x, self.y, self.noisy = rng, gen, x, y, noisy
+        self.noise_sigma, self.batch, self.m = noise_sigma, batch, div_points
+        self.n = x.shape[0]
+        self.order, self.cursor = rng.permutation(self.n), 0
+        self.pos = self.BLOCK
 
-    def zero_grad(self) -> None:
-        for p in self.params:
-            p.grad = None
+    def _refill(self) -> None:
+        idx = np.empty((self.BLOCK, self.batch), dtype=np.int64)
+        for j in range(self.BLOCK):
+            if self.cursor + self.batch > self.n:  # a new epoch: reshuffle
+                self.order, self.cursor = self.rng.permutation(self.n), 0
+            idx[j] = self.order[self.cursor : self.cursor + self.batch]
+            self.cursor += self.batch
+        idx_t = torch.as_tensor(idx)
+        noise = torch.randn((self.BLOCK, self.batch, self.x.shape[1]), generator=self.gen, dtype=self.x.dtype)
+        self.xb = self.x[idx_t]
+        self.yb = torch.addcmul(self.y[idx_t], noise, self.noisy[idx_t], value=self.noise_sigma)
+        self.pts = self.x[torch.as_tensor(self.rng.integers(0, self.n, size=(self.BLOCK, self.m)))]
+        self.pos = 0
 
-    @torch.no_grad()
-    def step(self, lr_scale: float = 1.0) -> None:
-        self.t += 1
-        b1, b2 = self.betas
-        lr = self.lr * lr_scale
-        c1, c2 = 1.0 - b1**self.t, 1.0 - b2**self.t
-        for p, m, v in zip(self.params, self.m, self.v, strict=True):
-            g = p.grad
-            p.mul_(1.0 - lr * self.wd)
-            m.mul_(b1).add_(g, alpha=1.0 - b1)
-            v.mul_(b2).addcmul_(g, g, value=1.0 - b2)
-            p.addcdiv_(m, (v / c2).sqrt_().add_(self.eps), value=-lr / c1)
+    def next(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(x (batch, d), y (batch, d), divergence points (m, d))`` of the next step."""
+        if self.pos == self.BLOCK:
+            self._refill()
+        j = self.pos
+        self.pos += 1
+        return self.xb[j], self.yb[j], self.pts[j]
+
+
+def _multistep_into(
+    params: FlatParams, model: FourierKoopman, win, rng, batch: int, weight: float, terms
+) -> torch.Tensor:
+    """Add ``weight`` x the multi-step loss's gradient (by autograd) to ``params.grad``; return the weighted term."""
+    wb = win[torch.as_tensor(rng.integers(0, win.shape[0], size=min(batch, win.shape[0])))]
+    with torch.enable_grad():
+        for t in model.parameters():
+            t.grad = None
+        loss_m = multistep_loss(model, wb)
+        (weight * loss_m).backward()
+    for t, g in zip((model.W, model.b, model.A, model.B), (params.gW, params.gb, params.gA, params.gB), strict=True):
+        g.add_(t.grad)
+    terms["multistep"] = loss_m.detach()
+    return weight * loss_m.detach()
+
+
+def _check_finite(losses: torch.Tensor, k: int) -> None:
+    """Raise if any loss up to step ``k`` is not finite, naming the first such step."""
+    bad = ~torch.isfinite(losses[:k])
+    if bool(bad.any()):
+        first = int(torch.nonzero(bad)[0, 0])
+        raise FloatingPointError(f"training diverged at step {first + 1}: loss {losses[first].item()}")
 
 
 def spectral_radius(A: np.ndarray, B: np.ndarray) -> float:
