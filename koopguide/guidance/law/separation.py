@@ -106,6 +106,25 @@ def barrier_rows(
     return a, np.sum(a * vj, axis=1) - gain_per_s * h
 
 
+def heading_speed_cap(a: np.ndarray, b: np.ndarray, heading_ned: np.ndarray, drift_ned: np.ndarray) -> float:
+    """The largest setpoint speed s >= 0 [m/s] at which the boat keeps every condition ``a v >= b`` *before* it
+    has turned onto the setpoint's direction; ``math.inf`` when no condition bounds it, 0 when one fails at s = 0.
+
+    ArduPilot Rover in GUIDED reduces a velocity setpoint to a heading and a speed held over ground *along the
+    boat's heading*, not along the setpoint (mode_guided.cpp, set_desired_heading_and_speed; FACTS "ArduPilot
+    Rover"), and the cross-heading drift (current, sway) is not corrected. A boat that cannot move sideways
+    (skid-steer, rudder) turns at a few degrees per second, so for seconds it moves at s h + w (h: the unit
+    heading, w: the drift across it) whatever the setpoint's direction. Each condition a_j (s h + w) >= b_j
+    with a_j . h < 0 (the bow toward the neighbour) bounds s <= (a_j . w - b_j) / (-a_j . h)."""
+    h = np.asarray(heading_ned, dtype=float).reshape(2)
+    along = a @ h  # (k,) [m]
+    bounded = along < -1e-12
+    if not bounded.any():
+        return math.inf
+    slack = (a @ np.asarray(drift_ned, dtype=float).reshape(2) - b)[bounded]  # [m^2/s]
+    return max(0.0, float(np.min(slack / -along[bounded])))
+
+
 def _candidates(cmd: np.ndarray, a: np.ndarray, b: np.ndarray, vmax: float) -> list[np.ndarray]:
     """The optimum's possible places: the command, projections onto each boundary, boundary intersections."""
     out = [cmd]
