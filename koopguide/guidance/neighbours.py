@@ -77,7 +77,8 @@ class Neighbours:
         - ESTIMATE_M, the position estimates' error;
         - BRAKE_MPS2 x age^2 / 2: how far the neighbour may have left the course it was moved on along since
           its status (``ages_s``, vehicle time) - the reachable set of a boat of bounded acceleration;
-        - closing speed x (REACTION_S + age): the gap closed before this boat's setpoint acts;
+        - closing speed x REACTION_S: the gap closed before this boat's setpoint acts (the neighbour is already
+          moved on to now at its last velocity);
         - own closing speed^2 / (2 BRAKE_MPS2): its braking distance;
         - TURN_CREEP_M x (how far this bow points at the neighbour now or on its turn to ``turn_to_rad``,
           :func:`sweep_facing`, + how far the neighbour's course points at this boat): a boat turning on the
@@ -99,7 +100,7 @@ class Neighbours:
                 facing += max(-float(toward @ vj) / speed_j, 0.0)
             unheard = 0.5 * BRAKE_MPS2 * age**2  # how far it may have left its course since it was heard
             braking = own**2 / (2.0 * BRAKE_MPS2)
-            out.append(ESTIMATE_M + unheard + closing * (REACTION_S + age) + braking + TURN_CREEP_M * facing)
+            out.append(ESTIMATE_M + unheard + closing * REACTION_S + braking + TURN_CREEP_M * facing)
         return np.array(out)
 
     def keep_separation(
@@ -122,12 +123,13 @@ class Neighbours:
         others, ages = [nb for nb, _ in heard], [age for _, age in heard]
         own_v = np.zeros(2) if velocity_ned is None else np.asarray(velocity_ned, dtype=float)
         p, fleet, wanted = np.asarray(position_ned, dtype=float), self.fleet, np.array(v, dtype=float)
+        hold = fleet.min_separation_m + ESTIMATE_M  # within the allowance only hold the gap; part within this
 
         def passes(toward: np.ndarray) -> tuple[np.ndarray, separation.SeparationResult]:
             turn_to = math.atan2(toward[1], toward[0]) if np.hypot(*toward) > 1e-12 else None
             d = fleet.min_separation_m + self.margins(p, own_v, others, ages, heading_rad, turn_to)
             return d, separation.separation_filter(
-                self.own_id, p, wanted, others, d, fleet.barrier_gain_per_s, self.max_speed_mps
+                self.own_id, p, wanted, others, d, fleet.barrier_gain_per_s, self.max_speed_mps, recover_within_m=hold
             )
 
         distance, out = passes(wanted)
@@ -140,7 +142,7 @@ class Neighbours:
             if active and speed > TURN_SPEED_MPS:  # turn first: cos(heading error), floored
                 filtered = filtered * max(float(filtered @ bow) / speed, TURN_SPEED_MPS / speed)
                 speed = float(np.hypot(*filtered))
-            a, b = separation.barrier_rows(p, others, distance, fleet.barrier_gain_per_s)
+            a, b = separation.barrier_rows(p, others, distance, fleet.barrier_gain_per_s, hold)
             drift = own_v - float(own_v @ bow) * bow  # across the heading [m/s]
             cap = max(separation.heading_speed_cap(a, b, bow, drift), HEADING_SPEED_MPS)
             if speed > cap:

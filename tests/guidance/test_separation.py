@@ -176,3 +176,22 @@ def test_heading_speed_cap_is_the_largest_speed_keeping_every_condition_along_th
         assert np.all((a @ (cap * bow + w) - b)[toward] >= -1e-9 * (1.0 + np.abs(b[toward])))
     faster = (a @ ((cap + 1e-6 + 1e-6 * cap) * bow + w) - b)[toward]
     assert np.any(faster < 0.0)  # ... and any faster breaks one (the cap is the largest)
+
+
+@settings(max_examples=200, deadline=None)
+@given(own=point, nbs=st.lists(neighbour, min_size=1, max_size=4), d=st.floats(0.2, 1.0), r=st.floats(0.05, 1.0))
+def test_within_the_allowance_the_barrier_only_holds_the_gap_and_parts_the_boats_within_the_recovery_distance(
+    own, nbs, d, r
+):
+    r = min(r, d)
+    p = np.array(own)
+    a, b = barrier_rows(p, nbs, d, 0.4)
+    a_r, b_r = barrier_rows(p, nbs, d, 0.4, recover_within_m=r)
+    np.testing.assert_array_equal(a, a_r)
+    held = np.sum(a * np.array([nb.velocity_ned for nb in nbs]), axis=1)  # b of "the gap does not close"
+    gap = np.array([math.dist(own, nb.position_ned) for nb in nbs])
+    outside, between = gap >= d, (gap >= r) & (gap < d)
+    np.testing.assert_allclose(b_r[outside], b[outside])  # outside the barrier: unchanged
+    np.testing.assert_allclose(b_r[between], held[between], atol=1e-12)  # inside it: hold the gap, no more
+    assert np.all(b_r[gap < r] > held[gap < r] - 1e-12)  # within r: part
+    assert np.all(b_r <= b + 1e-12)  # never more demanding than without
