@@ -27,8 +27,8 @@ def line_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.mark.parametrize(
     ("encounter", "current_mps"),
     [
-        pytest.param("head_on", 0.0, id="head-on-calm"),
-        pytest.param("crossing_90", fe.CURRENT_MPS, id="crossing-current"),
+        pytest.param("crossing_120", 0.0, id="crossing-calm"),
+        pytest.param("head_on", fe.CURRENT_MPS, id="head-on-current"),
     ],
 )
 def test_boats_keep_their_separation_and_reach_their_slots(line_model: Path, encounter: str, current_mps: float):
