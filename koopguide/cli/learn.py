@@ -56,10 +56,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks that print figures (never timed tests)")
     p.add_argument(
         "what",
-        choices=["speed", "lasa", "sitl", "guidance", "missions", "soak"],
+        choices=["speed", "lasa", "sitl", "guidance", "missions", "soak", "separation"],
         help="speed: training and query speed; lasa: all LASA shapes, seeds, ablations and a report; "
         "sitl: simulator; guidance: service latency and CPU; missions: closed-loop campaign of vehicles x flows "
-        "x starts; soak: hours of guidance at 50 Hz, memory and latency growth",
+        "x starts; soak: hours of guidance at 50 Hz, memory and latency growth; separation: two-boat encounters "
+        "(head-on, crossing, overtaking) x vehicles x currents, the fleet's separation and arrival",
     )
     p.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the benchmark")
     p.set_defaults(run=cmd_bench)
@@ -227,6 +228,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from koopguide.harness import campaign
 
         return campaign.main(args.rest)
+    if args.what == "separation":
+        from koopguide.harness import fleet_encounters
+
+        return fleet_encounters.main(args.rest)
     if args.what == "guidance":
         from koopguide.harness import guidance_bench
 

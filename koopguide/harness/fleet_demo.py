@@ -28,6 +28,7 @@ from koopguide.guidance.settings import GuidanceConfig
 from koopguide.harness.mission import demo_start_pose, free_udp_port, tank_around
 
 FLEET_SETTLE_S = 15.0  # simulated seconds watched after the last boat arrived
+SLOT_ROOM_M = 0.5  # the tank reaches at least this far beyond each slot, plus tank_around's margin [m]
 FLEET_MAX_SPEEDUP = 4.0  # the demo runs the simulator at most this fast: two services share the machine
 
 
@@ -85,11 +86,15 @@ def fleet_setup(
     guidance_extra: dict[str, Any] | None = None,
     sim_extra: dict[str, Any] | None = None,
     crossing: bool = False,
+    per_boat: list[dict[str, Any]] | None = None,
+    slots_ned: np.ndarray | None = None,
 ) -> tuple[list[GuidanceConfig], Any, list[tuple[float, float, float]]]:
     """N services and one N-boat simulator: boat k starts at ``starts_model[k]`` (its frame's model
     coordinates, the frame's +x along ``headings_deg[k]``, default 90) heading along the field; the shared goal
     is NED (0, 0), split into slots ``fleet.slot_separation_m`` apart, assigned from the start positions
-    (``crossing``: in reverse order instead, so that the boats' courses cross, for tests)."""
+    (``crossing``: in reverse order instead, so that the boats' courses cross, for tests). ``per_boat[k]``:
+    guidance overrides of boat k alone (e.g. its max speed); ``slots_ned`` (n, 2): each boat's goal instead of
+    its assigned slot [m]."""
     from koopguide.base import config
     from koopguide.guidance import settings
     from koopguide.model.field import load_field
@@ -117,11 +122,12 @@ def fleet_setup(
     separation = settings.load(overrides=base).fleet.slot_separation_m
     goals = slot_goals(np.zeros(2), np.array([p[:2] for p in poses]), separation)
     goals = goals[::-1] if crossing else goals
+    goals = goals if slots_ned is None else np.asarray(slots_ned, dtype=float).reshape(n, 2)
     port, stride = ports_with_stride(n)
     cfgs = [
         settings.load(
             overrides=config.merge(
-                base,
+                config.merge(base, (per_boat or [{}] * n)[k]),
                 {
                     "vehicle_id": f"boat{k + 1}",
                     "mavlink": {"endpoint": f"udp:127.0.0.1:{port + k * stride}", "target_system": k + 1},
@@ -131,7 +137,8 @@ def fleet_setup(
         )
         for k in range(n)
     ]
-    world = tank_around(np.vstack([*corners, [p[:2] for p in poses]]))
+    around_slots = goals[:, None, :] + SLOT_ROOM_M * np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]])  # room to turn
+    world = tank_around(np.vstack([*corners, [p[:2] for p in poses], *around_slots]))
     sim = config.merge(
         {
             "seed": 0,

@@ -14,6 +14,7 @@ from koopguide.guidance.law.separation import (
     Neighbour,
     assign_slots,
     barrier_rows,
+    heading_speed_cap,
     rendezvous_slots,
     separation_filter,
 )
@@ -146,3 +147,51 @@ def test_head_on_boats_pass_each_other_keeping_separation_and_both_arrive():
     assert closest >= 0.4 - 0.01  # the barrier holds (Euler steps of 0.02 s: a centimetre of slack)
     for k in p:
         assert np.linalg.norm(p[k] - goal[k]) < 0.05  # no deadlock: both reach the other's start
+
+
+unit_angle = st.floats(-math.pi, math.pi)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    own=point,
+    nbs=st.lists(neighbour, min_size=1, max_size=4),
+    heading=unit_angle,
+    drift=st.tuples(st.floats(-0.05, 0.05), st.floats(-0.05, 0.05)),
+    d=st.floats(0.1, 1.0),
+    alpha=st.floats(0.1, 5.0),
+)
+def test_heading_speed_cap_is_the_largest_speed_keeping_every_condition_along_the_heading(
+    own, nbs, heading, drift, d, alpha
+):
+    a, b = barrier_rows(np.array(own), nbs, d, alpha)
+    bow, w = np.array([math.cos(heading), math.sin(heading)]), np.array(drift)
+    cap = heading_speed_cap(a, b, bow, w)
+    toward = a @ bow < -1e-12  # the rows that a speed along the heading can break
+    if not toward.any():
+        assert cap == math.inf
+        return
+    assert 0.0 <= cap < math.inf
+    if cap > 0.0:  # at the cap every such row holds for the velocity along the heading plus the drift...
+        assert np.all((a @ (cap * bow + w) - b)[toward] >= -1e-9 * (1.0 + np.abs(b[toward])))
+    faster = (a @ ((cap + 1e-6 + 1e-6 * cap) * bow + w) - b)[toward]
+    assert np.any(faster < 0.0)  # ... and any faster breaks one (the cap is the largest)
+
+
+@settings(max_examples=200, deadline=None)
+@given(own=point, nbs=st.lists(neighbour, min_size=1, max_size=4), d=st.floats(0.2, 1.0), r=st.floats(0.05, 1.0))
+def test_within_the_allowance_the_barrier_only_holds_the_gap_and_parts_the_boats_within_the_recovery_distance(
+    own, nbs, d, r
+):
+    r = min(r, d)
+    p = np.array(own)
+    a, b = barrier_rows(p, nbs, d, 0.4)
+    a_r, b_r = barrier_rows(p, nbs, d, 0.4, recover_within_m=r)
+    np.testing.assert_array_equal(a, a_r)
+    held = np.sum(a * np.array([nb.velocity_ned for nb in nbs]), axis=1)  # b of "the gap does not close"
+    gap = np.array([math.dist(own, nb.position_ned) for nb in nbs])
+    outside, between = gap >= d, (gap >= r) & (gap < d)
+    np.testing.assert_allclose(b_r[outside], b[outside])  # outside the barrier: unchanged
+    np.testing.assert_allclose(b_r[between], held[between], atol=1e-12)  # inside it: hold the gap, no more
+    assert np.all(b_r[gap < r] > held[gap < r] - 1e-12)  # within r: part
+    assert np.all(b_r <= b + 1e-12)  # never more demanding than without

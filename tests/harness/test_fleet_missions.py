@@ -25,12 +25,6 @@ def free_tcp_port() -> int:
 
 
 @pytest.mark.timeout(150)
-@pytest.mark.xfail(
-    reason="known failure (issue 13 open): with the certified (Lyapunov-limited) Zshape field the two boats come "
-    "to 0.33-0.34 m on these crossing courses, below min_separation_m 0.4 (it held 0.415-0.424 m with the "
-    "uncertified field the filter was tuned on); the separation filter's margin needs rework",
-    strict=False,
-)
 def test_two_services_on_crossing_courses_keep_separation_and_reach_their_slots(zshape_model: Path) -> None:
     start = data.load_lasa("Zshape").trajectories[0][0]
     # boat1's field runs East into the goal, boat2's (its frame turned 180 deg) West; boat1 gets the east

@@ -94,16 +94,47 @@ def slot_goals(goal_ned: np.ndarray, starts_ned: np.ndarray, separation_m: float
 
 # ----------------------------------------------------------------------------------------- the filter
 def barrier_rows(
-    position_ned: np.ndarray, neighbours: list[Neighbour], min_separation_m: float | np.ndarray, gain_per_s: float
+    position_ned: np.ndarray,
+    neighbours: list[Neighbour],
+    min_separation_m: float | np.ndarray,
+    gain_per_s: float,
+    recover_within_m: float | np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The CBF condition of each neighbour as ``A v >= b``: A (k, 2) [m], b (k,) [m^2/s]; the separation
-    one for all or (k,) one per neighbour [m]."""
+    one for all or (k,) one per neighbour [m].
+
+    Inside the barrier (h < 0) the condition asks the pair to part at alpha |h|; with ``recover_within_m``
+    (< the separation) it asks that only within that distance, and between the two only that the gap does
+    not close (h is raised to min(|p - p_j|^2 - r^2, 0)): a barrier grown by an allowance (a neighbour not
+    heard for a while, a boat turning toward it) holds the boats where they are instead of driving them off."""
     p = np.asarray(position_ned, dtype=float)
     pj = np.array([nb.position_ned for nb in neighbours], dtype=float).reshape(-1, 2)
     vj = np.array([nb.velocity_ned for nb in neighbours], dtype=float).reshape(-1, 2)
     a = 2.0 * (p - pj)
-    h = np.sum((p - pj) ** 2, axis=1) - min_separation_m**2
+    squared = np.sum((p - pj) ** 2, axis=1)
+    h = squared - np.asarray(min_separation_m) ** 2
+    if recover_within_m is not None:
+        h = np.maximum(h, np.minimum(squared - np.asarray(recover_within_m) ** 2, 0.0))
     return a, np.sum(a * vj, axis=1) - gain_per_s * h
+
+
+def heading_speed_cap(a: np.ndarray, b: np.ndarray, heading_ned: np.ndarray, drift_ned: np.ndarray) -> float:
+    """The largest setpoint speed s >= 0 [m/s] at which the boat keeps every condition ``a v >= b`` *before* it
+    has turned onto the setpoint's direction; ``math.inf`` when no condition bounds it, 0 when one fails at s = 0.
+
+    ArduPilot Rover in GUIDED reduces a velocity setpoint to a heading and a speed held over ground *along the
+    boat's heading*, not along the setpoint (mode_guided.cpp, set_desired_heading_and_speed; FACTS "ArduPilot
+    Rover"), and the cross-heading drift (current, sway) is not corrected. A boat that cannot move sideways
+    (skid-steer, rudder) turns at a few degrees per second, so for seconds it moves at s h + w (h: the unit
+    heading, w: the drift across it) whatever the setpoint's direction. Each condition a_j (s h + w) >= b_j
+    with a_j . h < 0 (the bow toward the neighbour) bounds s <= (a_j . w - b_j) / (-a_j . h)."""
+    h = np.asarray(heading_ned, dtype=float).reshape(2)
+    along = a @ h  # (k,) [m]
+    bounded = along < -1e-12
+    if not bounded.any():
+        return math.inf
+    slack = (a @ np.asarray(drift_ned, dtype=float).reshape(2) - b)[bounded]  # [m^2/s]
+    return max(0.0, float(np.min(slack / -along[bounded])))
 
 
 def _candidates(cmd: np.ndarray, a: np.ndarray, b: np.ndarray, vmax: float) -> list[np.ndarray]:
@@ -158,15 +189,17 @@ def separation_filter(
     gain_per_s: float = 1.0,
     max_speed_mps: float = 0.3,
     sidestep: float = 0.5,
+    recover_within_m: float | np.ndarray | None = None,
 ) -> SeparationResult:
-    """Filter ``command_ned`` [m/s] for own boat at ``position_ned`` [m] among ``neighbours`` (CBF condition)."""
+    """Filter ``command_ned`` [m/s] for own boat at ``position_ned`` [m] among ``neighbours`` (CBF condition;
+    ``recover_within_m`` as :func:`barrier_rows`)."""
     cmd = np.asarray(command_ned, dtype=float).reshape(2)
     speed = float(np.hypot(*cmd))
     capped = cmd if speed <= max_speed_mps else cmd * (max_speed_mps / speed)
     if not neighbours:
         return SeparationResult(capped, not np.array_equal(capped, cmd), True, None, ())
     p = np.asarray(position_ned, dtype=float).reshape(2)
-    a, b = barrier_rows(p, neighbours, min_separation_m, gain_per_s)
+    a, b = barrier_rows(p, neighbours, min_separation_m, gain_per_s, recover_within_m)
     closest = float(np.min(np.linalg.norm(a, axis=1)) / 2.0)
     broken = a @ capped < b - EPS
     if not broken.any() and speed <= max_speed_mps:
