@@ -49,7 +49,7 @@ class Helm:
         than R: Coulter (1992), "Implementation of the pure pursuit path tracking algorithm"); None: as
         configured."""
         radius = self.ability.radius_m
-        if not self.ability.needs_way or radius is None:
+        if not self.ability.needs_way or radius is None or self.cfg.fleet.enabled:
             return None
         return max(self.cfg.command.lookahead_m, 2.0 * radius)
 
@@ -84,8 +84,11 @@ class Helm:
     ) -> Command:
         """Toward the goal ``distance_m`` away at ground velocity ``wanted_ned``: heading and speed, ahead or
         astern (a boat that needs way: along the line it will hold, law/line_approach.py)."""
-        if heading_rad is None:  # no attitude: all that can be sent is a velocity
-            return self._velocity(self.law.steer(wanted_ned, None, self._current(current_ned), CRAB_MIN_SPEED_MPS))
+        if heading_rad is None or self.cfg.fleet.enabled:
+            # no attitude: all that can be sent is a velocity; in a fleet the separation filter shapes velocities
+            # (law/separation.py reasons about Rover's heading-and-speed reading of a velocity-only setpoint)
+            current = self._current(current_ned)
+            return self._velocity(self.law.steer(wanted_ned, heading_rad, current, CRAB_MIN_SPEED_MPS))
         if self.ability.needs_way:
             return self._on_line(p_ned, heading_rad, current_ned)
         self.line.reset()
@@ -108,7 +111,12 @@ class Helm:
         distance_m: float,
     ) -> Command:
         """Following the field: the law's setpoint ``sp``, or heading and speed for a boat that needs way."""
-        if self.ability.needs_way and heading_rad is not None and sp.ground_ned is not None:
+        if (
+            self.ability.needs_way
+            and heading_rad is not None
+            and sp.ground_ned is not None
+            and not self.cfg.fleet.enabled
+        ):
             if distance_m <= self.line_radius_m():
                 return self._on_line(p_ned, heading_rad, current_ned)
             self.line.reset()
