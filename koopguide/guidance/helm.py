@@ -35,6 +35,9 @@ class Helm:
         self.planner = ManeuverPlanner(cfg.command.max_speed_mps, cfg.command.turn_speed_mps)
         self.line = LineApproach(cfg.command.max_speed_mps, cfg.arrival.station_gain, 0.5 * cfg.arrival.radius_m)
         self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
+        self.in_company = (
+            False  # other boats are heard (fleet): velocity-only setpoints, as the separation filter expects
+        )
 
     def reset(self) -> None:
         """A restarted vehicle (maybe another boat): forget how it turns."""
@@ -49,7 +52,7 @@ class Helm:
         than R: Coulter (1992), "Implementation of the pure pursuit path tracking algorithm"); None: as
         configured."""
         radius = self.ability.radius_m
-        if not self.ability.needs_way or radius is None or self.cfg.fleet.enabled:
+        if not self.ability.needs_way or radius is None or self.in_company:
             return None
         return max(self.cfg.command.lookahead_m, 2.0 * radius)
 
@@ -84,8 +87,8 @@ class Helm:
     ) -> Command:
         """Toward the goal ``distance_m`` away at ground velocity ``wanted_ned``: heading and speed, ahead or
         astern (a boat that needs way: along the line it will hold, law/line_approach.py)."""
-        if heading_rad is None or self.cfg.fleet.enabled:
-            # no attitude: all that can be sent is a velocity; in a fleet the separation filter shapes velocities
+        if heading_rad is None or self.in_company:
+            # no attitude: all that can be sent is a velocity; among other boats the separation filter shapes velocities
             # (law/separation.py reasons about Rover's heading-and-speed reading of a velocity-only setpoint)
             current = self._current(current_ned)
             return self._velocity(self.law.steer(wanted_ned, heading_rad, current, CRAB_MIN_SPEED_MPS))
@@ -111,12 +114,7 @@ class Helm:
         distance_m: float,
     ) -> Command:
         """Following the field: the law's setpoint ``sp``, or heading and speed for a boat that needs way."""
-        if (
-            self.ability.needs_way
-            and heading_rad is not None
-            and sp.ground_ned is not None
-            and not self.cfg.fleet.enabled
-        ):
+        if self.ability.needs_way and heading_rad is not None and sp.ground_ned is not None and not self.in_company:
             if distance_m <= self.line_radius_m():
                 return self._on_line(p_ned, heading_rad, current_ned)
             self.line.reset()

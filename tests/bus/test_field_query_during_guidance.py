@@ -51,6 +51,7 @@ def test_field_queries_during_guidance_leave_no_setpoint_gap_over_two_command_in
                     sys.executable, "-c", asker_code, stdout=asyncio.subprocess.PIPE
                 )
                 out, _ = await asyncio.wait_for(asker.communicate(), 60.0)
+                await asyncio.sleep(max(0.0, 1.5 - (boat.t - t0)))  # a window of 1.5 s at least around the queries
                 t1 = boat.t
                 times = [r.t for r in boat.setpoints(since=t0) if r.t <= t1]
                 gaps = [b - a for a, b in itertools.pairwise(times)]
