@@ -17,9 +17,9 @@ import math
 import numpy as np
 
 from koopguide.guidance.estimation.turning import TurnAbility
-from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceLaw, GuidanceState, Setpoint
+from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, CURRENT_MIN_MPS, GuidanceLaw, GuidanceState, Setpoint
 from koopguide.guidance.law.line_approach import LineApproach
-from koopguide.guidance.law.maneuver import CURRENT_MIN_MPS, Maneuver, ManeuverPlanner, wrap_pi
+from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, wrap_pi
 from koopguide.guidance.settings import GuidanceConfig
 
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out

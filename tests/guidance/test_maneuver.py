@@ -14,8 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from koopguide.guidance.estimation.turning import RATE_FLOOR, TurnAbility
+from koopguide.guidance.law.command import CURRENT_MIN_MPS
 from koopguide.guidance.law.line_approach import LineApproach
-from koopguide.guidance.law.maneuver import ASTERN_RAD, CURRENT_MIN_MPS, MIN_SPEED_MPS, ManeuverPlanner, wrap_pi
+from koopguide.guidance.law.maneuver import ASTERN_RAD, MIN_SPEED_MPS, ManeuverPlanner, wrap_pi
 from koopguide.mavlink.rover import MASK_VELOCITY_YAW, velocity_setpoint
 
 angles = st.floats(-math.pi, math.pi, allow_nan=False)

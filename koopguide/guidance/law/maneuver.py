@@ -31,12 +31,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from koopguide.guidance.estimation.turning import TurnAbility
+from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, CURRENT_MIN_MPS
 
 ASTERN_RAD = math.radians(120.0)  # switch ahead <-> astern when the current direction needs a larger turn
 TURNING_RAD = math.radians(15.0)  # a heading error this large is a turn (for the way floor)
 CIRCLE_MARGIN = 0.7  # fraction of the geometric speed cap used (the turn rate is an estimate)
-MIN_SPEED_MPS = 0.002  # the smallest speed sent while steering: exactly 0 would be Rover's stop controller
-CURRENT_MIN_MPS = 0.005  # a current estimate below this is no current [m/s]
+# the smallest speed sent while steering (exactly 0 would be Rover's stop controller), and the current estimate
+# below which there is no current: the law's own (law/command.py), one value each for both
+MIN_SPEED_MPS = CRAB_MIN_SPEED_MPS
 
 
 def wrap_pi(angle: float) -> float:
