@@ -35,9 +35,9 @@ class Helm:
         self.planner = ManeuverPlanner(cfg.command.max_speed_mps, cfg.command.turn_speed_mps)
         self.line = LineApproach(cfg.command.max_speed_mps, cfg.arrival.station_gain, 0.5 * cfg.arrival.radius_m)
         self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
-        self.in_company = (
-            False  # other boats are heard (fleet): velocity-only setpoints, as the separation filter expects
-        )
+        # other boats are heard (fleet): following the field and a boat that needs way go velocity-only, as the
+        # separation filter expects; a boat that turns in place keeps its ahead-or-astern maneuver near a point
+        self.in_company = False
 
     def reset(self) -> None:
         """A restarted vehicle (maybe another boat): forget how it turns."""
@@ -87,9 +87,12 @@ class Helm:
     ) -> Command:
         """Toward the goal ``distance_m`` away at ground velocity ``wanted_ned``: heading and speed, ahead or
         astern (a boat that needs way: along the line it will hold, law/line_approach.py)."""
-        if heading_rad is None or self.in_company:
-            # no attitude: all that can be sent is a velocity; among other boats the separation filter shapes velocities
-            # (law/separation.py reasons about Rover's heading-and-speed reading of a velocity-only setpoint)
+        if heading_rad is None or (self.in_company and self.ability.needs_way):
+            # no attitude: all that can be sent is a velocity; among other boats the separation filter shapes the
+            # velocities of a boat that needs way (law/separation.py reasons about Rover's heading-and-speed
+            # reading of a velocity-only setpoint). A boat that turns in place goes ahead or astern even in
+            # company: pivoting 180 deg to reach a point just behind it takes ~25 s at 7 deg/s (the filter is told
+            # which way it drives, Supervisor._keep_separation).
             current = self._current(current_ned)
             return self._velocity(self.law.steer(wanted_ned, heading_rad, current, CRAB_MIN_SPEED_MPS))
         if self.ability.needs_way:

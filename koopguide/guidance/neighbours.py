@@ -36,12 +36,14 @@ class Filtered:
     active: bool  # changed to keep the separation
     note: str  # for the reason when active ("" otherwise)
     closest_m: float | None  # the nearest boat heard of [m]; None: none
+    yaw_rad: float | None = None  # the yaw to send with it (astern), None: velocity only
 
 
 class Neighbours:
     def __init__(self, own_id: str, fleet: FleetSettings, max_speed_mps: float) -> None:
         self.own_id, self.fleet, self.max_speed_mps = own_id, fleet, max_speed_mps
         self.latest: dict[str, ev.NeighbourStatus] = {}  # by vehicle id
+        self.detour_sides: dict[str, int] = {}  # the side this boat goes round each parked neighbour (filter)
 
     def hear(self, status: ev.NeighbourStatus) -> None:
         if status.vehicle_id != self.own_id:
@@ -111,15 +113,22 @@ class Neighbours:
         wall_s: float,
         heading_rad: float | None,
         velocity_ned: np.ndarray | None = None,
+        yaw_rad: float | None = None,
     ) -> Filtered:
         """Filter ``v`` [m/s] with the barrier conditions at min_separation_m plus :meth:`margins` (the turn toward
         ``v``, then once more toward the filtered velocity); then, with the heading known, (1) while the bow
         points more than 90 deg off the filtered velocity, slow down to turn first, and (2) cap the speed so that
         the conditions hold for the velocity the boat has *until* it has turned, along its heading plus its
-        measured drift (separation.heading_speed_cap)."""
+        measured drift (separation.heading_speed_cap).
+        The helm's ``yaw_rad`` pointing away from ``v`` means astern: the boat drives along its stern, and the
+        filter reasons about that way (the heading turned by pi). A velocity the filter changes goes velocity-only
+        (the boat turns to it, as the filter expects) unless the boat can go on astern along it."""
+        astern = yaw_rad is not None and v[0] * math.cos(yaw_rad) + v[1] * math.sin(yaw_rad) < 0.0
+        if heading_rad is not None and astern:
+            heading_rad += math.pi
         heard = self.current_with_ages(t_s, wall_s)
         if not heard:
-            return Filtered(v, False, "", None)
+            return Filtered(v, False, "", None, yaw_rad)
         others, ages = [nb for nb, _ in heard], [age for _, age in heard]
         own_v = np.zeros(2) if velocity_ned is None else np.asarray(velocity_ned, dtype=float)
         p, fleet, wanted = np.asarray(position_ned, dtype=float), self.fleet, np.array(v, dtype=float)
@@ -129,13 +138,22 @@ class Neighbours:
             turn_to = math.atan2(toward[1], toward[0]) if np.hypot(*toward) > 1e-12 else None
             d = fleet.min_separation_m + self.margins(p, own_v, others, ages, heading_rad, turn_to)
             return d, separation.separation_filter(
-                self.own_id, p, wanted, others, d, fleet.barrier_gain_per_s, self.max_speed_mps, recover_within_m=hold
+                self.own_id,
+                p,
+                wanted,
+                others,
+                d,
+                fleet.barrier_gain_per_s,
+                self.max_speed_mps,
+                recover_within_m=hold,
+                detour_sides=self.detour_sides,
             )
 
         distance, out = passes(wanted)
         if out.active:  # the boat turns toward the filtered velocity instead: its own sweep
             distance, out = passes(out.velocity_ned)
         filtered, active = out.velocity_ned, out.active
+        self.detour_sides = out.detours
         speed = float(np.hypot(*filtered))
         if heading_rad is not None and speed > 1e-12:
             bow = np.array([np.cos(heading_rad), np.sin(heading_rad)])
@@ -148,10 +166,12 @@ class Neighbours:
             if speed > cap:
                 filtered, active = filtered * (cap / speed), True
         if not active:
-            return Filtered(v, False, "", out.closest_m)
+            return Filtered(v, False, "", out.closest_m, yaw_rad)
         who = f", yielding to {', '.join(out.yielding_to)}" if out.yielding_to else ""
         note = f"separation active: nearest boat {out.closest_m:.2f} m (min {fleet.min_separation_m:g}){who}"
-        return Filtered((float(filtered[0]), float(filtered[1])), True, note, out.closest_m)
+        on_astern = astern and float(filtered[0] * math.cos(yaw_rad) + filtered[1] * math.sin(yaw_rad)) < 0.0
+        f = (float(filtered[0]), float(filtered[1]))
+        return Filtered(f, True, note, out.closest_m, yaw_rad if on_astern else None)
 
 
 def sweep_facing(heading_rad: float, turn_to_rad: float | None, bearing_rad: float) -> float:

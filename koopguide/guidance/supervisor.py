@@ -277,7 +277,7 @@ class Supervisor:
                 reason = f"{distance:.2f} m from the goal (within reacquire_radius_m {arrival.reacquire_radius_m:g})"
                 reason += "; keeping station"
         elif self.degraded:
-            wanted = self.station.update(now, error)
+            wanted = self.station.update(now, error, integrate=False)  # the way to go is no bias
             speed = float(np.hypot(*wanted))
             if 1e-12 < speed < cfg.command.min_speed_mps:  # direct pursuit makes progress
                 wanted = wanted * (cfg.command.min_speed_mps / speed)
@@ -352,22 +352,25 @@ class Supervisor:
             state, reason = S.FAULT, f"setpoints are not going out ({self.reason})"
         self.separation_active = False
         if send and state in (S.GUIDING, S.ARRIVED) and self.cfg.fleet.enabled and self.neighbours.latest:
-            v, reason = self._keep_separation(v, reason, t)
-            yaw = None if self.separation_active else yaw  # the filtered velocity goes as it is
+            v, reason, yaw = self._keep_separation(v, reason, t, yaw)
         self._set_state(state, reason, t)
         velocity = (float(v[0]), float(v[1])) if send else None
         guided = yaw if state in (S.GUIDING, S.ARRIVED) else None
         yaw = None if velocity is None else self.helm.yaw_for(velocity, guided, self.vehicle.heading_rad)
         return ev.Decision(velocity, yaw, state, reason, self.degraded and state is S.GUIDING, tuple(requests))
 
-    def _keep_separation(self, v: tuple[float, float], reason: str, t: float) -> tuple[tuple[float, float], str]:
-        """The setpoint filtered to keep fleet.min_separation_m from the boats heard lately (law/separation.py)."""
+    def _keep_separation(
+        self, v: tuple[float, float], reason: str, t: float, yaw: float | None
+    ) -> tuple[tuple[float, float], str, float | None]:
+        """(velocity, reason, yaw) filtered to keep fleet.min_separation_m from the boats heard (neighbours.py)."""
         estimate = self.vehicle.estimate(t)
         if estimate is None:
-            return v, reason
-        out = self.neighbours.keep_separation(estimate[0], v, t, self._wall, self.vehicle.heading_at(t), estimate[1])
+            return v, reason, yaw
+        out = self.neighbours.keep_separation(
+            estimate[0], v, t, self._wall, self.vehicle.heading_at(t), estimate[1], yaw
+        )
         self.separation_active, self.closest_neighbour_m = out.active, out.closest_m
-        return out.velocity_ned, f"{reason}; {out.note}" if out.active else reason
+        return out.velocity_ned, f"{reason}; {out.note}" if out.active else reason, out.yaw_rad
 
     def zero_setpoint(self) -> tuple[tuple[float, float], float | None]:
         """Zero velocity, and the yaw that goes with it (the current heading, when so configured and known)."""

@@ -102,6 +102,18 @@ def test_the_integral_is_clamped_and_does_not_wind_up_while_the_output_saturates
     assert math.hypot(*keeper.integral) < 0.05 * math.exp(-1.5)
 
 
+def test_direct_pursuit_adds_the_integral_without_growing_it() -> None:
+    """From afar the error is the way still to go, not a bias: integrated, it wound up and the boat overshot."""
+    keeper = StationKeeper(kp_per_s=0.5, ki_per_s2=0.1, integral_limit_mps=0.1, max_speed_mps=0.3, deadband_m=0.15)
+    keeper.integral = np.array([0.01, 0.0])  # a bias learnt while holding
+    for k in range(200):  # 10 s of pursuit 0.5 m off
+        v = keeper.update(k * 0.05, np.array([0.0, 0.5]), integrate=False)
+    np.testing.assert_array_equal(keeper.integral, [0.01, 0.0])  # kept, not grown
+    np.testing.assert_allclose(v, [0.01, 0.25])  # P + the bias as it was
+    keeper.update(10.05, np.array([0.0, 0.5]))  # holding again: it integrates
+    assert keeper.integral[1] > 0.0
+
+
 def test_the_progress_watchdog_forgives_an_overshoot_but_not_a_stall() -> None:
     watch = ProgressWatchdog(stall_s=10.0, stall_progress_m=0.05)
     goal, p, t = np.array([0.0, 0.0]), np.array([0.0, -3.0]), 0.0

@@ -122,3 +122,19 @@ def test_a_boat_bow_on_to_a_neighbour_at_the_barrier_slows_to_turn_instead_of_dr
     out = f.keep_separation(np.zeros(2), (0.0, 0.3), 0.0, 0.0, math.pi / 2, np.array([0.0, 0.05]))
     assert out.active
     assert math.hypot(*out.velocity_ned) <= 0.01  # asked 0.3 m/s; along the heading, toward boat1: next to nothing
+
+
+def test_a_boat_going_astern_is_judged_by_its_stern_and_keeps_its_yaw_only_while_it_can_go_on_astern():
+    """Near its slot a skid-steer boat may back onto the point (velocity + yaw, the yaw opposite the velocity):
+    the filter must reason about the way it moves, along its stern."""
+    f = Neighbours("boat2", FLEET, 0.3)
+    f.hear(ev.NeighbourStatus(0.0, 0.0, "boat1", (0.0, -0.55), (0.0, 0.0), 0.0))  # 0.55 m to the west
+    bow_east = math.pi / 2
+    free = f.keep_separation(np.zeros(2), (0.05, 0.0), 0.0, 0.0, math.pi, np.zeros(2), yaw_rad=math.pi)
+    assert not free.active and free.yaw_rad == math.pi  # bow south, backing north, clear of boat1: as asked
+    # backing west (yaw east), stern to boat1: the speed is capped as for a bow pointed at it
+    toward = f.keep_separation(np.zeros(2), (0.0, -0.1), 0.0, 0.0, bow_east, np.array([0.0, -0.05]), bow_east)
+    assert toward.active and math.hypot(*toward.velocity_ned) <= 0.01
+    # the same velocity and heading going ahead (no yaw): the bow points away, so the filter only shapes it
+    ahead = f.keep_separation(np.zeros(2), (0.0, -0.1), 0.0, 0.0, bow_east, np.array([0.0, -0.05]))
+    assert ahead.yaw_rad is None

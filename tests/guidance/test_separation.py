@@ -149,6 +149,24 @@ def test_head_on_boats_pass_each_other_keeping_separation_and_both_arrive():
         assert np.linalg.norm(p[k] - goal[k]) < 0.05  # no deadlock: both reach the other's start
 
 
+@pytest.mark.parametrize("own_id", ["a", "z"])  # lower or higher id than the parked boat "m": it does not matter
+@pytest.mark.parametrize("goal_east", [0.0, 0.05, -0.05, 0.2])  # dead astern of it, or a little to one side
+def test_a_boat_goes_round_a_parked_boat_in_its_way_and_arrives(own_id, goal_east):
+    """The goal lies just beyond a boat parked at its slot: projected alone, the go-to-goal command is almost
+    all toward it and the boat stalls (the barrier's deadlock); going round it, the boat arrives."""
+    d, dt, parked = 0.4, 0.02, np.array([0.0, 0.0])
+    p, goal = np.array([-2.0, 0.0]), np.array([0.45, goal_east])
+    nb = [Neighbour("m", tuple(parked), (0.0, 0.0))]
+    closest, sides = math.inf, None
+    for _ in range(3000):
+        out = separation_filter(own_id, p, 0.5 * (goal - p), nb, d, 1.0, 0.3, detour_sides=sides)
+        sides = out.detours
+        p = p + dt * out.velocity_ned
+        closest = min(closest, float(np.linalg.norm(p - parked)))
+    assert closest >= d - 0.01  # never into the barrier (Euler steps: a centimetre of slack)
+    assert np.linalg.norm(p - goal) < 0.05, p  # round it and there
+
+
 unit_angle = st.floats(-math.pi, math.pi)
 
 

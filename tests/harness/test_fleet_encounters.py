@@ -5,6 +5,8 @@ ground-truth record and both reach their slots. The whole family (every encounte
 
 from __future__ import annotations
 
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -23,9 +25,22 @@ def line_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-@pytest.mark.timeout(150)
+# Two services and the simulator share one interpreter (one GIL). In the test process, after hundreds of other
+# tests, they were starved for 0.35 s of wall clock at a time ("no fresh position for 1.4 s" at x4): 0.4 m of
+# travel at 0.3 m/s with stale setpoints, which no filter on the setpoint can answer for. A fresh interpreter and
+# x2 keep starvation out of the figures (a service really runs at x1: the same stall is 0.1 m there).
+SPEEDUP = 2.0
+
+
+def fly(name: str, model: Path, current_mps: float = 0.0) -> fe.EncounterResult:
+    """One encounter of diff_thrust boats, flown in a fresh interpreter."""
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return pool.submit(fe.fly, fe.ENCOUNTERS[name], model, "diff_thrust", current_mps, speedup=SPEEDUP).result()
+
+
+@pytest.mark.timeout(200)
 def test_boats_crossing_keep_their_separation_and_reach_their_slots(line_model: Path):
-    r = fe.fly(fe.ENCOUNTERS["crossing_120"], line_model, "diff_thrust", 0.0)
+    r = fly("crossing_120", line_model)
     print(r)
     assert r.min_separation_m >= settings.load().fleet.min_separation_m, r  # never closer (ground truth)
     assert r.filter_seen, r  # the courses met: the filter had to act
@@ -33,9 +48,9 @@ def test_boats_crossing_keep_their_separation_and_reach_their_slots(line_model: 
     assert max(r.slot_errors_m) <= fe.SLOT_RADIUS_M, r  # ... and are at their slots at the end
 
 
-@pytest.mark.timeout(150)
+@pytest.mark.timeout(200)
 def test_boats_head_on_in_a_current_keep_their_separation(line_model: Path):
-    r = fe.fly(fe.ENCOUNTERS["head_on"], line_model, "diff_thrust", fe.CURRENT_MPS)
+    r = fly("head_on", line_model, fe.CURRENT_MPS)
     print(r)
     assert r.min_separation_m >= settings.load().fleet.min_separation_m, r  # never closer (ground truth)
     assert r.filter_seen, r
@@ -44,3 +59,16 @@ def test_boats_head_on_in_a_current_keep_their_separation(line_model: Path):
             f"known (docs/fleet.md): in a current a boat ends off its slot in some runs, {r.slot_errors_m} m "
             "(near the slots each boat answers the other's station-keeping velocity)"
         )
+
+
+@pytest.mark.timeout(200)
+def test_a_boat_goes_round_a_boat_parked_on_its_course_and_both_reach_their_slots(line_model: Path):
+    """Overtaking: the slower boat reaches its slot first and parks on the other's course; a barrier filter alone
+    deadlocks behind it (the faster boat crept 0.005 m/s for a minute and never arrived): it goes round."""
+    r = fly("overtaking", line_model)
+    print(r)
+    assert r.min_separation_m >= settings.load().fleet.min_separation_m, r  # never closer (ground truth)
+    assert r.filter_seen, r
+    assert all(t is not None for t in r.arrival_s), r
+    assert max(r.slot_errors_m) <= fe.SLOT_RADIUS_M, r
+    assert r.arrival_s[0] < 90.0, r  # round it, not a minute's creep and a direct-pursuit fallback

@@ -24,17 +24,24 @@ boundary, and the boundaries' pairwise intersections). Head-on encounters make t
 both boats stop on the line between them; the tie-breaker: a boat whose command breaks the condition for a
 neighbour with a lower id (string order) first adds ``sidestep`` x |command| to the right, perpendicular to
 the line to that neighbour (COLREGs rule 14: both turn to starboard when each yields), so the pair slides past.
+A neighbour that is parked (slower than ``PARKED_MPS``: at its slot, or stopped itself) will not give way, and
+a command straight at it projects to almost nothing (the classic deadlock of barrier filters; Wang, Ames &
+Egerstedt 2017 perturb it away): a boat whose command breaks a parked neighbour's condition, whatever the ids,
+goes around it, adding ``|command|`` perpendicular to the line to it on the side the command already leans to
+(the shorter way round; kept while it goes round, starboard when dead ahead).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 EPS = 1e-9  # [m/s] tolerance of the constraints' check
+PARKED_MPS = 0.03  # a neighbour slower than this will not give way: go around it [m/s]
+SIDE_DEADBAND = 0.1  # a command leaning less than this fraction of its speed to a side keeps the side chosen before
 
 
 @dataclass(frozen=True)
@@ -53,6 +60,7 @@ class SeparationResult:
     feasible: bool  # every barrier condition and the speed cap hold at velocity_ned
     closest_m: float | None  # distance to the nearest neighbour [m]; None without neighbours
     yielding_to: tuple[str, ...]  # neighbours (lower ids) this boat sidestepped for
+    detours: dict[str, int] = field(default_factory=dict)  # parked neighbours gone around: +1 starboard, -1 port
 
 
 # ------------------------------------------------------------------------------------------------ slots
@@ -190,9 +198,11 @@ def separation_filter(
     max_speed_mps: float = 0.3,
     sidestep: float = 0.5,
     recover_within_m: float | np.ndarray | None = None,
+    detour_sides: dict[str, int] | None = None,
 ) -> SeparationResult:
     """Filter ``command_ned`` [m/s] for own boat at ``position_ned`` [m] among ``neighbours`` (CBF condition;
-    ``recover_within_m`` as :func:`barrier_rows`)."""
+    ``recover_within_m`` as :func:`barrier_rows`; ``detour_sides``: the sides chosen at the last call to go
+    around parked neighbours, as returned in ``SeparationResult.detours``)."""
     cmd = np.asarray(command_ned, dtype=float).reshape(2)
     speed = float(np.hypot(*cmd))
     capped = cmd if speed <= max_speed_mps else cmd * (max_speed_mps / speed)
@@ -205,11 +215,21 @@ def separation_filter(
     if not broken.any() and speed <= max_speed_mps:
         return SeparationResult(cmd, False, True, closest, ())
     wanted = cmd.copy()  # the projection caps the speed itself (projecting the capped command is not closest)
-    yielding = []
+    yielding, detours, reach = [], {}, min(speed, max_speed_mps)
     for i, nb in enumerate(neighbours):
-        if broken[i] and nb.vehicle_id < own_id:  # yield to the lower id: step to the right of the line to it
-            to_nb = -a[i] / max(float(np.hypot(*a[i])), 1e-12)
-            wanted += sidestep * min(speed, max_speed_mps) * np.array([-to_nb[1], to_nb[0]])  # +90 deg: starboard
+        if not broken[i]:
+            continue
+        to_nb = -a[i] / max(float(np.hypot(*a[i])), 1e-12)
+        starboard = np.array([-to_nb[1], to_nb[0]])  # +90 deg from the line to it
+        if float(np.hypot(*nb.velocity_ned)) < PARKED_MPS:  # it will not give way: go round it
+            lean = float(cmd @ starboard)
+            side = (1 if lean > 0.0 else -1) if abs(lean) > SIDE_DEADBAND * speed else None
+            side = side or (detour_sides or {}).get(nb.vehicle_id, 1)
+            wanted += side * reach * starboard
+            detours[nb.vehicle_id] = side
+            yielding.append(nb.vehicle_id)
+        elif nb.vehicle_id < own_id:  # yield to the lower id: step to the right of the line to it
+            wanted += sidestep * reach * starboard
             yielding.append(nb.vehicle_id)
     v, feasible = project(wanted, a, b, max_speed_mps)
-    return SeparationResult(v, True, feasible, closest, tuple(yielding))
+    return SeparationResult(v, True, feasible, closest, tuple(yielding), detours)

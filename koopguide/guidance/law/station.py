@@ -62,9 +62,14 @@ class StationKeeper:
         self.integral = np.zeros(2)
         self.t = None
 
-    def update(self, t: float, error_ned: np.ndarray, proportional_ned: np.ndarray | None = None) -> np.ndarray:
+    def update(
+        self, t: float, error_ned: np.ndarray, proportional_ned: np.ndarray | None = None, integrate: bool = True
+    ) -> np.ndarray:
         """The wanted ground velocity at vehicle time ``t`` for position error ``error_ned`` = goal - p;
-        ``proportional_ned`` replaces the term kp e (e.g. one capped by a model of the boat) [m/s]."""
+        ``proportional_ned`` replaces the term kp e (e.g. one capped by a model of the boat) [m/s].
+        ``integrate=False`` adds the integral as it is without growing it: direct pursuit from afar, where the
+        error is the way still to go, not a bias (integrated, it wound up to the limit in 3 s at 0.5 m and the
+        boat overshot its goal by 0.2 m on arrival, then sat there while P and the wound-up I cancelled)."""
         e = np.asarray(error_ned, dtype=float)
         if not np.all(np.isfinite(e)):
             self.reset()
@@ -75,7 +80,7 @@ class StationKeeper:
         proportional = self.kp * e if proportional_ned is None else np.asarray(proportional_ned, dtype=float)
         out = proportional + self.integral
         saturated = float(np.hypot(*out)) >= self.max_speed
-        if dt > 0.0 and not (saturated and float(e @ out) > 0.0):  # conditional integration
+        if integrate and dt > 0.0 and not (saturated and float(e @ out) > 0.0):  # conditional integration
             norm_e = float(np.hypot(*e))
             if norm_e <= self.deadband:
                 integral = self.integral * math.exp(-dt / LEAK_S)
