@@ -92,7 +92,7 @@ class Helm:
             # velocities of a boat that needs way (law/separation.py reasons about Rover's heading-and-speed
             # reading of a velocity-only setpoint). A boat that turns in place goes ahead or astern even in
             # company: pivoting 180 deg to reach a point just behind it takes ~25 s at 7 deg/s (the filter is told
-            # which way it drives, Supervisor._keep_separation).
+            # which way it drives, Neighbours.keep_separation).
             current = self._current(current_ned)
             return self._velocity(self.law.steer(wanted_ned, heading_rad, current, CRAB_MIN_SPEED_MPS))
         if self.ability.needs_way:

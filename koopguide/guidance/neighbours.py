@@ -123,7 +123,7 @@ class Neighbours:
         The helm's ``yaw_rad`` pointing away from ``v`` means astern: the boat drives along its stern, and the
         filter reasons about that way (the heading turned by pi). A velocity the filter changes goes velocity-only
         (the boat turns to it, as the filter expects) unless the boat can go on astern along it."""
-        astern = yaw_rad is not None and v[0] * math.cos(yaw_rad) + v[1] * math.sin(yaw_rad) < 0.0
+        astern = yaw_rad is not None and _astern(v, yaw_rad)
         if heading_rad is not None and astern:
             heading_rad += math.pi
         heard = self.current_with_ages(t_s, wall_s)
@@ -169,9 +169,13 @@ class Neighbours:
             return Filtered(v, False, "", out.closest_m, yaw_rad)
         who = f", yielding to {', '.join(out.yielding_to)}" if out.yielding_to else ""
         note = f"separation active: nearest boat {out.closest_m:.2f} m (min {fleet.min_separation_m:g}){who}"
-        on_astern = astern and float(filtered[0] * math.cos(yaw_rad) + filtered[1] * math.sin(yaw_rad)) < 0.0
         f = (float(filtered[0]), float(filtered[1]))
-        return Filtered(f, True, note, out.closest_m, yaw_rad if on_astern else None)
+        return Filtered(f, True, note, out.closest_m, yaw_rad if astern and _astern(f, yaw_rad) else None)
+
+
+def _astern(v: tuple[float, float] | np.ndarray, yaw_rad: float) -> bool:
+    """Whether velocity ``v`` [m/s] held at heading ``yaw_rad`` [rad] is astern (against the bow)."""
+    return float(v[0]) * math.cos(yaw_rad) + float(v[1]) * math.sin(yaw_rad) < 0.0
 
 
 def sweep_facing(heading_rad: float, turn_to_rad: float | None, bearing_rad: float) -> float:
