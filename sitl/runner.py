@@ -87,6 +87,7 @@ class Simulation:
         self.steps = 0
         self._stop = asyncio.Event()
         self.wall_time_running_s = 0.0  # wall time spent inside run() [s]
+        self.behind_max_s = 0.0  # the most simulated time run() was ever due but not yet simulated [s]
         self._closed = False
 
     @classmethod
@@ -196,6 +197,10 @@ class Simulation:
         self._publish()
 
     # ---- running ----------------------------------------------------------------------------------
+    def reset_pace(self) -> None:
+        """Forget how far behind the pace run() fell so far (``behind_max_s``): measure from here."""
+        self.behind_max_s = 0.0
+
     def stop(self) -> None:
         """Ask run() to return after the current slice (call from the loop's thread)."""
         self._stop.set()
@@ -214,6 +219,9 @@ class Simulation:
             while not self._stop.is_set() and self.steps < end_step:
                 if speedup > 0:
                     due = step0 + math.floor((loop.time() - wall0) * speedup / self.dt + 1e-9)
+                    # a late wake-up (a busy machine): the steps due are run in a burst, with no I/O
+                    # between them; how far behind the pace this got tells whether a run was paced
+                    self.behind_max_s = max(self.behind_max_s, (due - self.steps) * self.dt)
                     budget = min(due - self.steps, MAX_STEPS_PER_SLICE, end_step - self.steps)
                 else:
                     budget = min(MAX_STEPS_PER_SLICE, end_step - self.steps)
@@ -317,3 +325,8 @@ class SimulationThread:
     def t(self) -> float:
         """Simulated time now [s]."""
         return self.call(lambda s: s.t)
+
+    @property
+    def behind_max_s(self) -> float:
+        """Simulation.behind_max_s: the furthest the simulator fell behind its pace so far [s]."""
+        return self.call(lambda s: s.behind_max_s)

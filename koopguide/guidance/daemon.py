@@ -16,6 +16,7 @@ Conventions: positions and velocities in local NED [m, m/s]; vehicle time [s] fr
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
 import math
 import time
@@ -169,12 +170,10 @@ class GuidanceDaemon:
         self._stop.set()
 
     async def run(self) -> None:
-        tasks = [
-            asyncio.create_task(self._control_loop()),
-            asyncio.create_task(self._heartbeat_loop()),
-            asyncio.create_task(self._status_loop()),
-            asyncio.create_task(self._neighbour_loop()),
-        ]
+        """Until stop(); the objects made before sit out the collector's passes (gc.freeze, docs/architecture.md)."""
+        gc.freeze()
+        loops = (self._control_loop(), self._heartbeat_loop(), self._status_loop(), self._neighbour_loop())
+        tasks = [asyncio.create_task(loop) for loop in loops]
         try:
             await self._stop.wait()
         finally:
@@ -185,6 +184,7 @@ class GuidanceDaemon:
                 await self._shutdown()
             finally:
                 await self.close()
+                gc.unfreeze()
 
     async def close(self) -> None:
         try:

@@ -143,7 +143,7 @@ def run_one(spec: RunSpec) -> RunResult:
     """One mission in this process (a worker), measured against the ground truth."""
     import logging
 
-    from koopguide.harness.mission import fly, mission_at
+    from koopguide.harness.mission import fly_paced, mission_at
 
     logging.basicConfig(level=logging.ERROR)  # the service's state changes are in the results, not on stderr
 
@@ -157,7 +157,7 @@ def run_one(spec: RunSpec) -> RunResult:
         seed=spec.seed,
         sim_extra=sim_extra,
     )
-    result = asyncio.run(fly(cfg, Path(spec.model), sim_cfg, spec.timeout_s, settle_s=spec.hold_s))
+    result = asyncio.run(fly_paced(cfg, Path(spec.model), sim_cfg, spec.timeout_s, settle_s=spec.hold_s))
     law, goal = result.law, result.law.goal_ned
     track = result.track
     line = streamline(law.field_velocity_ned, np.array(pose[:2]), goal, cfg.arrival.radius_m)

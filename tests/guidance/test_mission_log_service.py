@@ -23,7 +23,7 @@ def logged(tmp_path_factory: pytest.TempPathFactory, zshape_model: Path):
     """One mission from Zshape's first start in a 0.02 m/s current, logged; (cfg, result, log path)."""
     path = tmp_path_factory.mktemp("log") / "mission.mcap"
     cfg, sim_cfg, _pose = mission.demo_mission(zshape_model, 0, 0.02, 10.0, vehicle_id="boat8")
-    result = asyncio.run(mission.fly(cfg, zshape_model, sim_cfg, 120.0, settle_s=3.0, log_path=path))
+    result = asyncio.run(mission.fly_paced(cfg, zshape_model, sim_cfg, 120.0, settle_s=3.0, log_path=path))
     assert result.arrived
     return cfg, result, path
 

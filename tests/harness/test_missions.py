@@ -1,5 +1,6 @@
-"""Whole missions: the real simulator (speed-up 20) and the real service over loopback MAVLink, with
-currents, zenoh status and the field queryable. Ground truth comes from the simulator's recorder."""
+"""Whole missions: the real simulator (speed-up 10, slower when it cannot keep that pace) and the real
+service over loopback MAVLink, with currents, zenoh status and the field queryable. Ground truth comes
+from the simulator's recorder."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from koopguide.harness import mission
 from sitl import config as sitl_config
 from tests.support.status_samples import free_port
 
-SPEEDUP = 20.0
+SPEEDUP = 10.0  # mission.fly_paced flies a run again slower if the simulator could not keep this pace
 ARRIVE_M = 0.15
 
 
@@ -39,7 +40,7 @@ def fly(model: Path, start: int, flow: dict | None, zenoh_port: int | None = Non
             )
         )
     zenoh_config = default_zenoh_config(zenoh_port) if zenoh_port else None
-    return cfg, asyncio.run(mission.fly(cfg, model, sim_cfg, timeout_s, settle_s=20.0, zenoh_config=zenoh_config))
+    return cfg, asyncio.run(mission.fly_paced(cfg, model, sim_cfg, timeout_s, settle_s=20.0, zenoh_config=zenoh_config))
 
 
 def first_time_within(result: mission.MissionResult, radius: float) -> float | None:
@@ -133,7 +134,9 @@ def test_arriving_across_the_current_the_boat_stays_within_0_2_m(zshape_model: P
 def test_on_arrival_loiter_settles_onto_the_goal_then_hands_over_to_loiter(zshape_model: Path) -> None:
     cfg, sim_cfg, _ = mission.demo_mission(zshape_model, 3, 0.0, SPEEDUP)
     cfg = replace(cfg, arrival=replace(cfg.arrival, on_arrival=settings.ArrivalAction.LOITER))
-    result = asyncio.run(mission.fly(cfg, zshape_model, sim_cfg, 120.0, settle_s=cfg.arrival.settle_timeout_s + 10))
+    result = asyncio.run(
+        mission.fly_paced(cfg, zshape_model, sim_cfg, 120.0, settle_s=cfg.arrival.settle_timeout_s + 10)
+    )
     assert result.arrived
     assert result.mode_before_exit == "LOITER"
     assert result.max_distance_after_arrival_m <= 0.2  # no current here: LOITER holds it

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import socket
+import time
 
 from sitl.runner import Simulation, SimulationThread
 from tests.support.sitl_gcs import Gcs, mavlink, mavutil, sim_config
@@ -47,6 +48,23 @@ def test_same_seed_same_trajectory_at_1x_and_20x():
     assert moving, "the controller should be working against the flow"
     other = scripted_run(20.0, seed=6, seconds=2.0)
     assert other != fast
+
+
+def test_a_pause_of_the_process_shows_as_falling_behind_the_pace_by_pause_times_speedup():
+    """A busy machine: the simulator's thread is blocked 0.1 s wall at speed-up 20, 2 s simulated; the
+    missions use this to refuse runs that were not paced (mission.fly_paced)."""
+    cfg = sim_config({"mavlink": {"endpoints": [f"udpout:127.0.0.1:{unused_udp_port()}"]}})
+    with SimulationThread(cfg) as sim:
+        time.sleep(0.3)
+        sim.call(lambda s: s.reset_pace())
+        time.sleep(0.3)
+        assert sim.behind_max_s < 1.0  # keeping pace (a busy machine may lag a few tens of ms)
+        sim.call(lambda s: time.sleep(0.1))  # the loop's thread stalls
+        time.sleep(0.2)
+        assert 1.8 <= sim.behind_max_s <= 4.0
+        sim.call(lambda s: s.reset_pace())
+        time.sleep(0.2)
+        assert sim.behind_max_s < 1.0
 
 
 def test_several_boats_each_on_their_own_port():
