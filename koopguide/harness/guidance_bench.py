@@ -93,7 +93,7 @@ def trained_model(model: Path | None, workdir: Path) -> Path:
     if REUSED_MODEL.is_file():
         return REUSED_MODEL
     path = workdir / "zshape.pt"
-    print(f"training Zshape into {path} (about 10 s) ...", file=sys.stderr, flush=True)
+    print(f"training Zshape into {path} (a few seconds) ...", file=sys.stderr, flush=True)
     command = [sys.executable, "-m", "koopguide", "train", "--lasa", "Zshape", "-o", str(path), "--quiet"]
     try:
         done = subprocess.run(command, capture_output=True, text=True, timeout=TRAIN_TIMEOUT_S, check=False)
