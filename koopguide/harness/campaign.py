@@ -92,6 +92,7 @@ class RunResult:
     max_setpoint_mps: float
     arrived_but_far: bool  # the service said arrived while the true boat was beyond the reacquire radius
     track: list[list[float]]  # (T, 3) t, N, E, decimated for the plots
+    speedup: float = 0.0  # as flown: lower than asked when the simulator could not keep that pace (fly_paced)
     error: str | None = None
 
 
@@ -193,6 +194,7 @@ def run_one(spec: RunSpec) -> RunResult:
         max_setpoint_mps=result.max_setpoint_mps,
         arrived_but_far=far,
         track=np.round(track[:: max(1, len(track) // 400)], 3).tolist(),
+        speedup=result.sim_speedup,
     )
 
 
@@ -314,11 +316,13 @@ def main(argv: list[str] | None = None) -> int:
     wall = time.monotonic() - started
     (args.output / "runs.json").write_text(json.dumps([asdict(r) for r in results], indent=1))
     position = SENSORS["sensors"]["position"]
+    slowed = sum(1 for r in results if r.error is None and r.speedup < args.speedup)
     setup = (
         f"`koopguide bench missions` with model `{model.name}`: {len(specs)} simulated missions "
         f"({', '.join(args.vehicles)} x {', '.join(args.flows)} x {args.starts} starts drawn from the "
         f"demonstrations' box enlarged by 10%, seed {args.seed}), speed-up x{args.speedup:g}, {args.workers} "
-        f"workers, {wall:.0f} s wall.\n\nMission: goal NED (0, 0), 0.04 m per model unit, model +x East, "
+        f"workers, {wall:.0f} s wall; {slowed} runs in which the simulator fell behind its pace were flown "
+        f"again slower (`mission.fly_paced`).\n\nMission: goal NED (0, 0), 0.04 m per model unit, model +x East, "
         f"`max_speed` 0.3 m/s, arrival radius 0.15 m, {args.timeout_s:g} s allowed to arrive, {args.hold_s:g} s "
         f"watched after arrival. Position sensor: noise {position['noise_std_m']} m, latency "
         f"{position['latency_s']} s. Uniform currents {CURRENT_MPS} m/s toward each side; the vortex and the "

@@ -87,6 +87,7 @@ class MissionResult:
     # the furthest the simulator fell behind its pace (simulated s): on a busy machine it catches up in
     # bursts while the service waits for positions, which a real vehicle never does
     sim_behind_max_s: float = 0.0
+    sim_speedup: float = 0.0  # the simulator's speed-up in this run [-]
 
 
 async def fly(
@@ -135,7 +136,9 @@ async def fly(
         if not runner.done():
             daemon.stop()
             await runner
-    return replace(summarize(daemon, records, t_start, t_arrived), sim_behind_max_s=behind_s)
+    return replace(
+        summarize(daemon, records, t_start, t_arrived), sim_behind_max_s=behind_s, sim_speedup=sim_cfg.speedup
+    )
 
 
 class PaceError(RuntimeError):
