@@ -86,8 +86,18 @@ class MissionResult:
     law: GuidanceLaw  # the service's guidance law (its field, frame and speed gain)
     # the furthest the simulator fell behind its pace (simulated s): on a busy machine it catches up in
     # bursts while the service waits for positions, which a real vehicle never does
-    sim_behind_max_s: float = 0.0
-    sim_speedup: float = 0.0  # the simulator's speed-up in this run [-]
+    sim_behind_max_s: float
+    sim_speedup: float  # the simulator's speed-up in this run [-]
+
+    def paced(self, cfg: GuidanceConfig) -> bool:
+        """Whether the simulator kept its pace: it never fell behind by more than half of ``stale_after_s``
+        (beyond that the service's holds for want of positions are the machine's, see :func:`fly_paced`)."""
+        return self.sim_behind_max_s <= pace_limit_s(cfg)
+
+
+def pace_limit_s(cfg: GuidanceConfig) -> float:
+    """How far the simulator may fall behind its pace in a valid run: half the service's ``stale_after_s``."""
+    return 0.5 * cfg.failsafe.stale_after_s
 
 
 async def fly(
@@ -136,9 +146,7 @@ async def fly(
         if not runner.done():
             daemon.stop()
             await runner
-    return replace(
-        summarize(daemon, records, t_start, t_arrived), sim_behind_max_s=behind_s, sim_speedup=sim_cfg.speedup
-    )
+    return summarize(daemon, records, t_start, t_arrived, behind_s, sim_cfg.speedup)
 
 
 class PaceError(RuntimeError):
@@ -153,20 +161,25 @@ async def fly_paced(
     seconds is X p simulated seconds in which the simulator catches up in a burst and the service, rightly,
     holds for want of fresh positions; such a run says nothing about guidance, so it is not counted.
     The verdict depends on the pace only, never on the mission's outcome. PaceError after ``attempts``."""
-    limit_s = 0.5 * cfg.failsafe.stale_after_s
     lags = []
     for _ in range(attempts):
         result = await fly(cfg, model, sim_cfg, timeout_s, **kwargs)
-        if result.sim_behind_max_s <= limit_s:
+        if result.paced(cfg):
             return result
         lags.append(f"{result.sim_behind_max_s:.2f} s at x{sim_cfg.speedup:g}")
         print(f"mission: simulator fell behind its pace by {lags[-1]}; flying it again slower", file=sys.stderr)
         sim_cfg = replace(sim_cfg, speedup=0.5 * sim_cfg.speedup)
+    limit_s = pace_limit_s(cfg)
     raise PaceError(f"the simulator fell behind its pace by more than {limit_s:.2f} s in every attempt: {lags}")
 
 
 def summarize(
-    daemon: Any, records: list[dict[str, Any]], t_start: float | None, t_arrived: float | None
+    daemon: Any,
+    records: list[dict[str, Any]],
+    t_start: float | None,
+    t_arrived: float | None,
+    behind_s: float,
+    speedup: float,
 ) -> MissionResult:
     states = [r for r in records if r.get("kind") == "state"]
     track = np.array([[r["t"], r["n"], r["e"]] for r in states]) if states else np.zeros((0, 3))
@@ -187,6 +200,8 @@ def summarize(
         max_distance_after_arrival_m=after,
         law=daemon.law,
         mode_before_exit=daemon.mode_before_exit,
+        sim_behind_max_s=behind_s,
+        sim_speedup=speedup,
     )
 
 
@@ -321,7 +336,7 @@ def run_demo(args: Any) -> int:
     gif = args.out / "demo.gif"
     frames = render_replay(read_mission(log), gif)
     after = result.max_distance_after_arrival_m
-    if result.sim_behind_max_s > 0.5 * cfg.failsafe.stale_after_s:
+    if not result.paced(cfg):
         print(
             f"koopguide demo: WARNING the simulator fell {result.sim_behind_max_s:.2f} s behind its pace (a busy "
             f"machine): the service held for want of fresh positions then; try a lower --speedup",
