@@ -18,7 +18,7 @@ import numpy as np
 
 from koopguide.guidance.estimation.turning import TurnAbility
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, CURRENT_MIN_MPS, GuidanceLaw, GuidanceState, Setpoint
-from koopguide.guidance.law.line_approach import LineApproach
+from koopguide.guidance.law.line_approach import DEFAULT_RADIUS_M, LineApproach
 from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, wrap_pi
 from koopguide.guidance.settings import GuidanceConfig
 
@@ -33,7 +33,11 @@ class Helm:
         self.cfg, self.law = cfg, law
         self.ability = TurnAbility()
         self.planner = ManeuverPlanner(cfg.command.max_speed_mps, cfg.command.turn_speed_mps)
-        self.line = LineApproach(cfg.command.max_speed_mps, cfg.arrival.station_gain, 0.5 * cfg.arrival.radius_m)
+        self.line = LineApproach(
+            cfg.command.max_speed_mps, cfg.arrival.station_gain, 0.5 * cfg.arrival.radius_m, cfg.command.turn_speed_mps
+        )
+        self.speed_mps = 0.0  # the boat's ground speed at the last observation [m/s]
+        self.water_mps = 0.0  # ... and its speed through the water along its heading (negative: astern) [m/s]
         self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
         # other boats are heard (fleet): following the field and a boat that needs way go velocity-only, as the
         # separation filter expects; a boat that turns in place keeps its ahead-or-astern maneuver near a point
@@ -65,17 +69,21 @@ class Helm:
         current_ned: np.ndarray | None,
     ) -> None:
         """The boat's heading, turn rate, ground velocity and the estimated current at vehicle time ``t``."""
+        if velocity_ned is not None:
+            self.speed_mps = float(np.hypot(*velocity_ned))
         if heading_rad is None or turn_rate_radps is None or velocity_ned is None:
             return
         water = np.asarray(velocity_ned, dtype=float) - (0.0 if current_ned is None else np.asarray(current_ned))
         u = float(water[0] * math.cos(heading_rad) + water[1] * math.sin(heading_rad))
+        self.water_mps = u
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
-        self.ability.update(t, asked, u, turn_rate_radps)
+        self.ability.update(t, asked, u, turn_rate_radps, heading_rad)
 
     def line_radius_m(self) -> float:
         """Within this distance of the goal a boat that needs way makes for the line it will hold (twice its
         turning radius: it has room to turn onto the line), and at least within the capture radius."""
-        return max(self.cfg.arrival.capture_radius_m, LINE_RADII * (self.ability.radius_m or 0.0))
+        radius = self.ability.radius_m if self.ability.radius_m is not None else DEFAULT_RADIUS_M
+        return max(self.cfg.arrival.capture_radius_m, LINE_RADII * radius if self.ability.needs_way else 0.0)
 
     def near(
         self,
@@ -84,9 +92,11 @@ class Helm:
         heading_rad: float | None,
         current_ned: np.ndarray | None,
         distance_m: float,
+        bias_ned: np.ndarray | None = None,
     ) -> Command:
         """Toward the goal ``distance_m`` away at ground velocity ``wanted_ned``: heading and speed, ahead or
-        astern (a boat that needs way: along the line it will hold, law/line_approach.py)."""
+        astern (a boat that needs way: along the line it will hold, law/line_approach.py, its speed from the
+        distance plus the station keeper's integral term ``bias_ned`` [m/s])."""
         if heading_rad is None or (self.in_company and self.ability.needs_way):
             # no attitude: all that can be sent is a velocity; among other boats the separation filter shapes the
             # velocities of a boat that needs way (law/separation.py reasons about Rover's heading-and-speed
@@ -96,7 +106,7 @@ class Helm:
             current = self._current(current_ned)
             return self._velocity(self.law.steer(wanted_ned, heading_rad, current, CRAB_MIN_SPEED_MPS))
         if self.ability.needs_way:
-            return self._on_line(p_ned, heading_rad, current_ned)
+            return self._on_line(p_ned, heading_rad, current_ned, bias_ned)
         self.line.reset()
         m = self.planner.plan(
             wanted_ned,
@@ -155,11 +165,23 @@ class Helm:
             return math.atan2(velocity[1], velocity[0]) if self.cfg.command.with_yaw else None
         return heading_rad if self.cfg.failsafe.zero_with_yaw else None
 
-    def _on_line(self, p_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None) -> Command:
+    def _on_line(
+        self, p_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None, bias_ned: np.ndarray | None = None
+    ) -> Command:
         c = self._current(current_ned)
         c = c if c is not None and float(np.hypot(*c)) >= CURRENT_MIN_MPS else None
         self.line.aim(p_ned, self.law.goal_ned, heading_rad, c)
-        m = self.line.command(p_ned, self.law.goal_ned, self.ability.radius_m)
+        m = self.line.command(
+            p_ned,
+            self.law.goal_ned,
+            heading_rad,
+            self.ability.radius_m,
+            current_ned=c,
+            speed_mps=self.speed_mps,
+            water_mps=self.water_mps,
+            bias_ned=bias_ned,
+            outside=self.law.outside_area,
+        )
         return self._maneuver(m)
 
     def _maneuver(self, m: Maneuver) -> Command:

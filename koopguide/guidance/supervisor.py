@@ -265,7 +265,7 @@ class Supervisor:
         state = S.GUIDING
         if self.arrived or drifted_near:
             wanted = self.station.update(now, error, law.station_velocity(p, current))  # P (capped) + I
-            v, yaw = self.helm.near(p, wanted, heading, current, distance)
+            v, yaw = self.helm.near(p, wanted, heading, current, distance, self.station.integral)
             if drifted_near and self.progress.update(now, p, wanted, distance):
                 return self._start_pursuit(now, wall, distance, requests)
             if drifted_near:
@@ -281,7 +281,7 @@ class Supervisor:
             speed = float(np.hypot(*wanted))
             if 1e-12 < speed < cfg.command.min_speed_mps:  # direct pursuit makes progress
                 wanted = wanted * (cfg.command.min_speed_mps / speed)
-            v, yaw = self.helm.near(p, wanted, heading, current, distance)
+            v, yaw = self.helm.near(p, wanted, heading, current, distance, self.station.integral)
             why = " (no progress in direct pursuit either)" if self.progress.update(now, p, wanted, distance) else ""
             reason = f"direct pursuit of the goal, {distance:.2f} m away: no progress along the field for "
             reason += f"{cfg.failsafe.stall_s:g} s{why}"

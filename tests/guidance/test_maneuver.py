@@ -131,11 +131,11 @@ def test_turn_ability_tells_a_pivoting_boat_from_one_that_needs_way() -> None:
 
 @pytest.mark.parametrize("current", [None, np.array([0.03, 0.0])])
 def test_line_approach_backs_down_onto_the_goal_and_steers_onto_the_line(current) -> None:
-    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05)
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15)
     goal = np.zeros(2)
     p = np.array([-0.5, 0.2])  # 0.5 m south of the goal, 0.2 m east of it
     line.aim(p, goal, heading_rad=math.pi, current_ned=current)  # the boat faces south
-    m = line.command(p, goal, radius_m=0.8)
+    m = line.command(p, goal, heading_rad=math.pi, radius_m=0.8, current_ned=current)
     travel = -unit(m.heading_rad)  # astern: it moves opposite its bow
     assert m.astern and m.speed_mps < 0
     assert float(travel @ (goal - p)) > 0  # toward the goal

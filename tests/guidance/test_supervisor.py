@@ -83,7 +83,8 @@ class Bench:
         response: float = 1.0,
     ):
         """Fix, attitude, decision, move: ``seconds`` of vehicle time; the decisions. The boat makes good
-        ``response`` times the setpoint through the water (1: exactly the setpoint)."""
+        ``response`` times the setpoint through the water (1: exactly the setpoint), its bow to the setpoint's yaw
+        when it has one, else along the setpoint."""
         decisions = []
         next_hb = self.t
         for _ in range(round(seconds / DT)):
@@ -97,7 +98,9 @@ class Bench:
                 self.sup.setpoint_sent(self.t)
                 if obey:
                     self.v = response * np.array(d.velocity_ned) + np.asarray(current)
-                    if math.hypot(*d.velocity_ned) > 1e-9:
+                    if d.yaw_rad is not None:  # velocity + yaw: the bow to the yaw, as Rover steers it (astern too)
+                        self.heading = d.yaw_rad
+                    elif math.hypot(*d.velocity_ned) > 1e-9:
                         self.heading = math.atan2(d.velocity_ned[1], d.velocity_ned[0])
             if not obey:
                 self.v = np.asarray(current, dtype=float)

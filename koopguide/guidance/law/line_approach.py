@@ -1,13 +1,28 @@
 """Bringing a boat that cannot turn without way onto a point, and keeping it there (pure math).
 
-A rudder boat turns only while it moves, on a circle of radius R (estimation/turning.py). It cannot turn on
-the spot to face the goal, nor to face the current once there, so it must arrive already on the line it
-will hold: the line through the goal along the current (bow upstream, where the current alone cannot set it
-sideways), or, in still water, the line from where the approach began. On that line it moves ahead or astern
-only; what is left across the line is steered out by line-of-sight guidance, aiming at the point
-``Delta`` further along the line (Fossen (2021), "Handbook of Marine Craft Hydrodynamics and Motion Control",
-2nd ed., section 12.4.2, LOS steering law ``chi_d = chi_p - atan(y_e / Delta)``). The look-ahead
-``Delta >= R`` keeps the turns it asks for within the boat's circle.
+A rudder boat turns only while it moves, on a circle of radius R (estimation/turning.py): at the arrival
+radius's scale (0.15 m) against R ~ 1.3 m it can neither turn on the spot to face the goal nor make a U-turn
+in the room a tank leaves. What it can do is what a driver does to turn a car in a narrow street: go ahead
+and astern in turn, each leg turning the heading the same way (the autopilot reverses the rudder astern,
+docs/rover.md), a K-turn. The approach is built on that:
+
+* the line it holds: through the goal along the current (in a current the boat holds only bow or stern
+  upstream: across it the current sets the boat sideways faster than the rudder, with the little way a
+  0.03 m/s current gives it, can turn it back), ahead into the current or astern into it, whichever end of
+  the line its heading is closer to; in still water the line from where the approach began to the goal;
+* the heading: line-of-sight guidance onto that line, aiming at the point ``Delta`` further along it in the
+  direction of travel (Fossen (2021), "Handbook of Marine Craft Hydrodynamics and Motion Control", 2nd ed.,
+  section 12.4.2, LOS steering law ``chi_d = chi_p - atan(y_e / Delta)``), ``Delta >= R`` so that the turns
+  it asks for stay within the boat's circle; astern the bow points opposite the course;
+* ahead or astern (the one state): toward the goal along the heading, with a leash: while the boat turns,
+  it goes on past the goal by at most ``LEASH_M`` before it reverses (a K-turn about the goal); once on the
+  line, only ``FLIP_M``. It also reverses before it leaves the area it may use (the model's domain and the
+  geofence, ``inside``), where a tank's walls or the shore may be;
+* the speed over ground along the heading: at least the way the rudder needs (``way_mps``) while turning,
+  else ``gain`` times the distance to the goal plus the station keeper's integral term along the heading
+  (PI with anti-windup, law/station.py: what holds a boat whose speed loop is not over ground); in a current, a speed that would move the boat over ground one way while the water
+  passes the rudder the other way (the autopilot sets the rudder by the speed's sign) is sent as exactly 0
+  instead, Rover's stop controller: the throttle goes off and the current carries the boat back.
 
 Conventions: positions ``(2,)`` local NED [m], velocities NED [m/s], headings [rad] from north.
 """
@@ -15,13 +30,27 @@ Conventions: positions ``(2,)`` local NED [m], velocities NED [m/s], headings [r
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
-from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver
+from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, wrap_pi
 
 MIN_DELTA_M = 0.3  # the smallest LOS look-ahead [m]
-FLIP_M = 0.03  # ahead <-> astern changes only when the goal is this far past the boat along the line [m]
+MAX_DELTA_M = 1.0  # the largest: a longer one only delays the turn onto the line (K-turns make up the rest) [m]
+STILL_MPS = 0.02  # slower than this through the water the boat is not yet moving either way [m/s]
+DEFAULT_RADIUS_M = 1.0  # the turning radius assumed before one is measured [m]
+FLIP_M = 0.03  # on the line: ahead <-> astern once the goal is this far behind the boat along its heading [m]
+LEASH_M = 0.3  # while turning (a K-turn): the boat goes on this far past the goal before it reverses [m]
+TURNING_RAD = math.radians(20.0)  # a heading error this large is a turn: keep way on
+K_TURN_RAD = math.radians(45.0)  # ... and this large a K-turn about the goal
+SWAP_RAD = math.radians(30.0)  # hysteresis of the bow's end of the line (past 90 deg + this, the ends swap)
+EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed (or EDGE_MIN_M) leaves the area
+EDGE_MIN_M = 0.15  # [m]
+EDGE_SLANT = math.sin(math.radians(20.0))  # ... "leaves" when at least this fraction of the look goes outward
+EDGE_COURSE_M = (
+    0.5  # a course along the line "leads out of the area" when the point this far along it is farther out [m]
+)
 
 
 def unit(angle_rad: float) -> np.ndarray:
@@ -29,56 +58,137 @@ def unit(angle_rad: float) -> np.ndarray:
 
 
 class LineApproach:
-    """LOS guidance onto the line through the goal with bow direction ``axis_rad`` (set by :meth:`aim`)."""
+    """LOS guidance onto the line through the goal with bow direction ``axis_rad`` (set by :meth:`aim`), ahead
+    and astern by turns."""
 
-    def __init__(self, max_speed_mps: float, gain_per_s: float, settle_m: float) -> None:
+    def __init__(self, max_speed_mps: float, gain_per_s: float, settle_m: float, way_mps: float) -> None:
         self.max_speed = max_speed_mps
-        self.settle_m = settle_m  # an offset across the line this small is left alone (no S-turns for it) [m]
+        self.settle_m = settle_m  # an offset across the line this small is "on the line" [m]
         self.gain = gain_per_s
+        self.way = min(way_mps, max_speed_mps)
         self.axis_rad: float | None = None  # the bow's direction on the line [rad]
-        self.in_current = False  # the line is the current's (bow upstream)
-        self.astern = False
+        self.in_current = False  # the line is the current's
+        self.travel: float | None = None  # toward the goal along the line: +1 along the axis, -1 against it
+        self.astern = False  # the boat is to move stern first (on the line: travel -1; in a K-turn: by legs)
+        self.pivot: np.ndarray | None = None  # where the K-turn under way began [m]
 
     def reset(self) -> None:
-        self.axis_rad, self.astern, self.in_current = None, False, False
+        self.axis_rad, self.astern, self.in_current, self.travel, self.pivot = None, False, False, None, None
 
     def aim(self, p_ned: np.ndarray, goal_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None) -> None:
-        """Choose the line: bow upstream in a current; in still water, the line from the boat to the goal, bow
-        along whichever way round the boat already faces (kept once chosen, until :meth:`reset`)."""
-        self.in_current = current_ned is not None
+        """Choose the line: along the current (the end nearest the one held, so that the line turns with the current
+        in a vortex); in still water the line from the boat to the goal (kept once chosen, until :meth:`reset`).
+        The bow's end of the line is the one the boat faces: past 90 deg + ``SWAP_RAD`` off it, the ends swap
+        (the way along the line to the goal is kept: ahead and astern swap with them)."""
         if current_ned is not None:
-            self.axis_rad = math.atan2(-current_ned[1], -current_ned[0])
+            upstream = math.atan2(-current_ned[1], -current_ned[0])
+            ref = heading_rad if self.axis_rad is None else self.axis_rad
+            self.axis_rad = min((upstream, wrap_pi(upstream + math.pi)), key=lambda end: abs(wrap_pi(end - ref)))
         elif self.axis_rad is None:
             to_goal = np.asarray(goal_ned, dtype=float) - np.asarray(p_ned, dtype=float)
-            bearing = math.atan2(to_goal[1], to_goal[0]) if float(np.hypot(*to_goal)) > 1e-6 else heading_rad
-            ahead = math.cos(bearing - heading_rad) >= 0.0
-            self.axis_rad = bearing if ahead else bearing + math.pi
+            self.axis_rad = math.atan2(to_goal[1], to_goal[0]) if float(np.hypot(*to_goal)) > 1e-6 else heading_rad
+        self.in_current = current_ned is not None
+        if abs(wrap_pi(heading_rad - self.axis_rad)) > math.pi / 2 + SWAP_RAD:
+            self.axis_rad = wrap_pi(self.axis_rad + math.pi)
+            self.travel = None if self.travel is None else -self.travel
 
-    def command(self, p_ned: np.ndarray, goal_ned: np.ndarray, radius_m: float | None) -> Maneuver:
-        """Heading and signed speed toward the goal along the line, steering out the cross-track error."""
+    def command(
+        self,
+        p_ned: np.ndarray,
+        goal_ned: np.ndarray,
+        heading_rad: float,
+        radius_m: float | None,
+        current_ned: np.ndarray | None = None,
+        speed_mps: float = 0.0,
+        water_mps: float = 0.0,
+        bias_ned: np.ndarray | None = None,
+        outside: Callable[[np.ndarray], float] | None = None,
+    ) -> Maneuver:
+        """Heading and signed speed toward the goal along the line, steering out the cross-track error.
+
+        ``speed_mps``: the boat's ground speed (how far ahead to look for the area's edge); ``water_mps``: its
+        speed through the water along its heading (negative: astern); ``bias_ned``: the
+        station keeper's integral term [m/s] (law/station.py), added along the heading; ``outside``: how far a point lies outside the area the
+        boat may use [m] (0 inside; None: no limit)."""
         if self.axis_rad is None:
             raise ValueError("LineApproach.command before aim()")
+        p = np.asarray(p_ned, dtype=float)
         a = unit(self.axis_rad)
         n = np.array([-a[1], a[0]])
-        e = np.asarray(p_ned, dtype=float) - np.asarray(goal_ned, dtype=float)
-        along, cross = float(e @ a), float(e @ n)  # [m] ahead of the goal (upstream), to the right of the line
-        delta = max(MIN_DELTA_M, radius_m or 0.0)
-        # ahead <-> astern once past the goal along the line; while off the line by more than settle_m, only once
-        # far enough past to have steered out part of the offset (an S-turn of radius R across y needs about
-        # 2 sqrt(R y) of travel)
-        flip = FLIP_M if abs(cross) <= self.settle_m else max(FLIP_M, math.sqrt(delta * abs(cross)))
-        if along > flip:
-            self.astern = True  # past the goal toward the bow: back down onto it
-        elif along < -flip:
-            self.astern = False
-        travel = -a if self.astern else a
-        aim = delta * travel - cross * n  # toward the point delta along the line (LOS)
-        heading = math.atan2(aim[1], aim[0]) + (math.pi if self.astern else 0.0)
-        if self.in_current and self.astern and abs(cross) <= self.settle_m:
-            # upstream of the goal on the line, bow upstream: let the current carry it back (speed exactly 0 is
-            # Rover's stop controller, throttle off); backing down would reverse its steering (Rover reverses
-            # the steering when the ground speed is negative) while the water still flows past the rudder ahead
-            return Maneuver(heading, 0.0, True)
-        speed = min(self.max_speed, self.gain * math.hypot(along, cross))
-        speed = max(speed, MIN_SPEED_MPS)
-        return Maneuver(heading, -speed if self.astern else speed, self.astern)
+        e = p - np.asarray(goal_ned, dtype=float)
+        along, cross = float(e @ a), float(e @ n)  # [m] ahead of the goal along the axis, to its right
+        delta = min(MAX_DELTA_M, max(MIN_DELTA_M, radius_m if radius_m is not None else DEFAULT_RADIUS_M))
+        h = unit(heading_rad)
+        # which way along the line to the goal (the bow lies along +a, so +1 is ahead): past the goal by the leash
+        # (FLIP_M once on the line), the other way
+        on_line = abs(cross) <= self.settle_m
+
+        def course(travel: float) -> np.ndarray:  # the LOS course for ``travel`` (unit, NED)
+            aim = delta * travel * a - cross * n
+            return aim / float(np.hypot(*aim))
+
+        def inward(travel: float) -> bool:  # that course does not lead out of the area
+            return outside is None or outside(p + EDGE_COURSE_M * course(travel)) <= outside(p)
+
+        def effort(travel: float) -> tuple[bool, float]:  # out of the area first, then the larger turn
+            return (not inward(travel), abs(wrap_pi(self._heading(travel, delta, a, n, cross) - heading_rad)))
+
+        if self.travel is None:  # toward the goal along the line; level with it, the smaller turn that stays inside
+            far = abs(along) > max(LEASH_M, abs(cross))
+            self.travel = (-1.0 if along > 0.0 else 1.0) if far else min((1.0, -1.0), key=effort)
+        target = self._heading(self.travel, delta, a, n, cross)
+        # off the line, where along the line the boat meets it matters less than getting there: past the goal by as
+        # much as it still has to go across
+        leash = FLIP_M if on_line and abs(wrap_pi(target - heading_rad)) <= TURNING_RAD else max(LEASH_M, abs(cross))
+        if self.travel > 0 and along > leash:
+            self.travel = -1.0
+        elif self.travel < 0 and along < -leash:
+            self.travel = 1.0
+        elif abs(along) <= leash and not inward(self.travel) and inward(-self.travel):
+            self.travel = -self.travel  # not yet past the goal either way: the way that stays in the area
+        heading = self._heading(self.travel, delta, a, n, cross)
+        error = abs(wrap_pi(heading - heading_rad))
+        if error > K_TURN_RAD:
+            # a K-turn: ahead and astern in turn about where it began, every leg turning the bow toward the heading,
+            # each leg until the boat has gone the leash past that point along its motion
+            if self.pivot is None:
+                self.pivot = p.copy()
+            sign = -1.0 if self.astern else 1.0
+            if float((self.pivot - p) @ (sign * h)) < -LEASH_M:
+                self.astern = not self.astern
+        else:
+            self.pivot = None
+            self.astern = self.travel < 0
+        if outside is not None:  # reverse before the area's edge, or back into it (unless the other way is worse)
+            look = max(EDGE_MIN_M, EDGE_LOOK_S * speed_mps)
+            sign = -1.0 if self.astern else 1.0
+            onward, back = outside(p + sign * look * h), outside(p - sign * look * h)
+            if onward > outside(p) + EDGE_SLANT * look and back < onward:  # heading out, more than along the edge
+                self.astern = not self.astern
+        sign = -1.0 if self.astern else 1.0
+        turning = error > TURNING_RAD
+        s = sign * min(self.max_speed, self.gain * math.hypot(along, cross))
+        if bias_ned is not None:
+            s += float(np.asarray(bias_ned, dtype=float) @ unit(heading))  # the PI's integral along the heading
+        if turning:
+            s = sign * max(self.way, sign * s)  # a rudder turns the boat only with way on
+        s = min(self.max_speed, max(-self.max_speed, s))
+        if s * sign < MIN_SPEED_MPS:  # toward the goal the other way than the boat is going: let it lie
+            s = 0.0
+        if s != 0.0 and current_ned is not None:
+            water = s - float(np.asarray(current_ned, dtype=float) @ unit(heading))  # through the water along it
+            if water * s < 0.0:  # over ground one way, the water past the rudder the other: drift instead
+                s = 0.0
+        if s * water_mps < 0.0 and abs(water_mps) > STILL_MPS:
+            # still moving the old way after a reversal: hold the heading while it stops (until the water passes
+            # the rudder the new way the rudder turns it the wrong way, whichever way the autopilot sets it)
+            heading = heading_rad
+        return Maneuver(heading, s, self.astern)
+
+    @staticmethod
+    def _heading(sign: float, delta: float, a: np.ndarray, n: np.ndarray, cross: float) -> float:
+        """The LOS heading for travel ``sign`` (+1 ahead along the axis, -1 astern): the bow toward the point
+        ``delta`` along the line, or away from it astern."""
+        aim = delta * sign * a - cross * n
+        course = math.atan2(aim[1], aim[0])
+        return course if sign > 0 else wrap_pi(course + math.pi)
