@@ -77,7 +77,7 @@ class Helm:
         u = float(water[0] * math.cos(heading_rad) + water[1] * math.sin(heading_rad))
         self.water_mps = u
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
-        self.ability.update(t, asked, u, turn_rate_radps, heading_rad)
+        self.ability.update(t, asked, u, turn_rate_radps)
 
     def line_radius_m(self) -> float:
         """Within this distance of the goal a boat that needs way makes for the line it will hold (twice its

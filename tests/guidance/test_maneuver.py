@@ -172,3 +172,36 @@ def test_ahead_goes_as_velocity_only_and_astern_or_a_hold_with_the_yaw() -> None
     assert yaw == 0.5 and np.allclose(v, -0.1 * unit(0.5))
     v, yaw = helm._maneuver(Maneuver(0.5, 0.0, True))
     assert yaw == 0.5 and np.allclose(v, 0.0)
+
+
+def test_line_approach_k_turns_toward_one_heading_ahead_then_astern_about_where_it_began() -> None:
+    """At the goal, facing across the current's line: legs ahead and astern in turn, both toward the same heading
+    (the autopilot reverses the rudder astern, so both legs turn the bow the same way)."""
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15)
+    goal, current, heading = np.zeros(2), np.array([0.03, 0.0]), math.pi / 2  # current toward N, bow E
+    line.aim(goal, goal, heading, current)
+    first = line.command(goal, goal, heading, radius_m=1.3, current_ned=current)
+    assert abs(wrap_pi(line.axis_rad)) < 1e-9 or abs(wrap_pi(line.axis_rad - math.pi)) < 1e-9  # along the current
+    assert not first.astern and first.speed_mps >= 0.15  # way on: the rudder turns the boat only with it
+    p = np.array([0.0, 0.35])  # the leg went 0.35 m ahead (east), past the leash
+    line.aim(p, goal, heading, current)
+    second = line.command(p, goal, heading, radius_m=1.3, current_ned=current, water_mps=0.0)
+    assert second.astern and second.speed_mps <= -0.15
+    assert abs(wrap_pi(second.heading_rad - first.heading_rad)) < math.radians(25.0)  # the same way round
+
+
+def test_line_approach_reverses_before_the_area_edge_and_lets_the_current_carry_it_where_the_rudder_would_err() -> None:
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15)
+    goal = np.zeros(2)
+    p = np.array([0.0, -0.6])  # 0.6 m west of the goal, on the line of a still-water approach, bow east
+    line.aim(p, goal, math.pi / 2, None)
+    assert not line.command(p, goal, math.pi / 2, radius_m=1.0).astern  # ahead to the goal
+    edge = line.command(p, goal, math.pi / 2, radius_m=1.0, speed_mps=0.2, outside=lambda q: max(q[1] + 0.5, 0.0))
+    assert edge.astern  # 0.1 m short of an edge at E -0.5 (the goal beyond it): not out of the area
+    # bow upstream (current toward N, bow S), 0.04 m upstream of the goal: backing down at 0.02 m/s over ground would
+    # still have the water pass the rudder from ahead; the service sends speed 0 (throttle off) and the current
+    # carries the boat back
+    hold = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15)
+    current, p = np.array([0.03, 0.0]), np.array([-0.04, 0.0])
+    hold.aim(p, goal, math.pi, current)
+    assert hold.command(p, goal, math.pi, radius_m=1.3, current_ned=current).speed_mps == 0.0

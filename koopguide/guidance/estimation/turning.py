@@ -34,8 +34,6 @@ RATE_FLOOR = math.radians(4.0)  # the turn rate assumed before any hard turn is 
 FADE_S = 60.0  # the fastest turn seen fades with this time constant [s]
 RADIUS_WEIGHT = 0.05  # weight of each new turning-radius sample in the running mean
 MAX_RADIUS_M = 20.0  # a larger u / |r| is not a turn (noise around straight running) [m]
-HEADING_BASE_S = 1.0  # the turn rate is also read from the heading's change over this long (a boat whose
-# telemetry reports no yaw rate while it turns is not stuck) [s]
 
 
 class TurnAbility:
@@ -50,28 +48,12 @@ class TurnAbility:
         self._stuck_since: float | None = None
         self._pivot_since: float | None = None
         self._t: float | None = None
-        self._heading_base: tuple[float, float] | None = None  # (t [s], heading [rad]) HEADING_BASE_S ago or less
-        self._heading_rate = 0.0  # |heading change| / time over the last base [rad/s]
 
-    def update(
-        self,
-        t: float,
-        asked_error_rad: float | None,
-        speed_water_mps: float,
-        turn_rate_radps: float,
-        heading_rad: float | None = None,
-    ) -> None:
+    def update(self, t: float, asked_error_rad: float | None, speed_water_mps: float, turn_rate_radps: float) -> None:
         """One sample at vehicle time ``t``: the heading error the boat was sent (None: no heading asked),
-        its speed through the water along its heading, its turn rate and its heading."""
+        its speed through the water along its heading and its turn rate."""
         if not (math.isfinite(speed_water_mps) and math.isfinite(turn_rate_radps)):
             return
-        if heading_rad is not None and math.isfinite(heading_rad):
-            if self._heading_base is None or t < self._heading_base[0]:
-                self._heading_base = (t, heading_rad)
-            elif t - self._heading_base[0] >= HEADING_BASE_S:
-                t0, h0 = self._heading_base
-                self._heading_rate = abs((heading_rad - h0 + math.pi) % (2.0 * math.pi) - math.pi) / (t - t0)
-                self._heading_base = (t, heading_rad)
         dt = 0.0 if self._t is None or t <= self._t else t - self._t
         self._t = t if self._t is None else max(self._t, t)
         self.turn_rate = max(RATE_FLOOR, self.turn_rate * math.exp(-dt / FADE_S))
@@ -82,7 +64,7 @@ class TurnAbility:
         u, r = abs(speed_water_mps), abs(turn_rate_radps)
         self.turn_rate = max(self.turn_rate, r)
         pivoting = u < STILL_MPS and r >= PIVOT_RATE
-        stuck = u < SLOW_MPS and r < STUCK_RATE and self._heading_rate < STUCK_RATE
+        stuck = u < SLOW_MPS and r < STUCK_RATE
         self._pivot_since = (t if self._pivot_since is None else self._pivot_since) if pivoting else None
         self._stuck_since = (t if self._stuck_since is None else self._stuck_since) if stuck else None
         if self._pivot_since is not None and t - self._pivot_since >= PIVOT_S:

@@ -9,20 +9,27 @@ docs/rover.md), a K-turn. The approach is built on that:
 * the line it holds: through the goal along the current (in a current the boat holds only bow or stern
   upstream: across it the current sets the boat sideways faster than the rudder, with the little way a
   0.03 m/s current gives it, can turn it back), ahead into the current or astern into it, whichever end of
-  the line its heading is closer to; in still water the line from where the approach began to the goal;
+  the line it faces when the approach begins (the ends swap only when it faces the other end by more than
+  90 deg + ``SWAP_RAD``); in still water the line from where the approach began to the goal;
+* the way along the line to the goal (``travel``, kept apart from ahead/astern): toward the goal, reversed
+  once the boat is past it by ``FLIP_M`` on the line, or off the line by as much as it still has to go
+  across (where along the line it meets the line matters less than getting there); level with the goal,
+  the way whose course stays inside the area the boat may use, then the one that needs the smaller turn;
 * the heading: line-of-sight guidance onto that line, aiming at the point ``Delta`` further along it in the
-  direction of travel (Fossen (2021), "Handbook of Marine Craft Hydrodynamics and Motion Control", 2nd ed.,
-  section 12.4.2, LOS steering law ``chi_d = chi_p - atan(y_e / Delta)``), ``Delta >= R`` so that the turns
-  it asks for stay within the boat's circle; astern the bow points opposite the course;
-* ahead or astern (the one state): toward the goal along the heading, with a leash: while the boat turns,
-  it goes on past the goal by at most ``LEASH_M`` before it reverses (a K-turn about the goal); once on the
-  line, only ``FLIP_M``. It also reverses before it leaves the area it may use (the model's domain and the
-  geofence, ``inside``), where a tank's walls or the shore may be;
+  way of travel (Fossen (2021), "Handbook of Marine Craft Hydrodynamics and Motion Control", 2nd ed.,
+  section 12.4.2, LOS steering law ``chi_d = chi_p - atan(y_e / Delta)``), ``R <= Delta <= MAX_DELTA_M``;
+  astern the bow points opposite the course;
+* ahead or astern: as the way of travel, except in a K-turn (heading error beyond ``K_TURN_RAD``), when the
+  boat goes ahead and astern in turn, each leg ``LEASH_M`` past where the K-turn began, all toward the same
+  heading; and it reverses before it leaves the area it may use (the model's domain and the geofence,
+  ``outside``), where a tank's walls or the shore may be. After a reversal the heading is held until the
+  water passes the rudder the new way (before that the rudder turns the boat the wrong way);
 * the speed over ground along the heading: at least the way the rudder needs (``way_mps``) while turning,
   else ``gain`` times the distance to the goal plus the station keeper's integral term along the heading
-  (PI with anti-windup, law/station.py: what holds a boat whose speed loop is not over ground); in a current, a speed that would move the boat over ground one way while the water
-  passes the rudder the other way (the autopilot sets the rudder by the speed's sign) is sent as exactly 0
-  instead, Rover's stop controller: the throttle goes off and the current carries the boat back.
+  (PI with anti-windup, law/station.py: what holds a boat whose speed loop is not over ground); in a
+  current, a speed that would move the boat over ground one way while the water passes the rudder the
+  other way (the autopilot sets the rudder by the speed's sign) is sent as exactly 0 instead, Rover's stop
+  controller: the throttle goes off and the current carries the boat back.
 
 Conventions: positions ``(2,)`` local NED [m], velocities NED [m/s], headings [rad] from north.
 """
@@ -48,9 +55,7 @@ SWAP_RAD = math.radians(30.0)  # hysteresis of the bow's end of the line (past 9
 EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed (or EDGE_MIN_M) leaves the area
 EDGE_MIN_M = 0.15  # [m]
 EDGE_SLANT = math.sin(math.radians(20.0))  # ... "leaves" when at least this fraction of the look goes outward
-EDGE_COURSE_M = (
-    0.5  # a course along the line "leads out of the area" when the point this far along it is farther out [m]
-)
+EDGE_COURSE_M = 0.5  # a course along the line "leads out" when the point this far along it is farther out [m]
 
 
 def unit(angle_rad: float) -> np.ndarray:
@@ -107,9 +112,9 @@ class LineApproach:
         """Heading and signed speed toward the goal along the line, steering out the cross-track error.
 
         ``speed_mps``: the boat's ground speed (how far ahead to look for the area's edge); ``water_mps``: its
-        speed through the water along its heading (negative: astern); ``bias_ned``: the
-        station keeper's integral term [m/s] (law/station.py), added along the heading; ``outside``: how far a point lies outside the area the
-        boat may use [m] (0 inside; None: no limit)."""
+        speed through the water along its heading (negative: astern); ``bias_ned``: the station keeper's
+        integral term [m/s] (law/station.py), added along the heading; ``outside``: how far a point lies
+        outside the area the boat may use [m] (0 inside; None: no limit)."""
         if self.axis_rad is None:
             raise ValueError("LineApproach.command before aim()")
         p = np.asarray(p_ned, dtype=float)
