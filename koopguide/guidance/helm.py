@@ -22,6 +22,7 @@ from koopguide.guidance.law.line_approach import DEFAULT_RADIUS_M, LineApproach
 from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, wrap_pi
 from koopguide.guidance.settings import GuidanceConfig
 
+PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.probe_turn_s)
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
 Command = tuple[np.ndarray, float | None]  # (velocity NED [m/s], yaw [rad] or None for velocity only)
 
@@ -38,6 +39,10 @@ class Helm:
         )
         self.speed_mps = 0.0  # the boat's ground speed at the last observation [m/s]
         self.water_mps = 0.0  # ... and its speed through the water along its heading (negative: astern) [m/s]
+        self.t: float | None = None  # vehicle time of the last observation [s]
+        self.probe_until: float | None = None  # vehicle time the turn probe ends [s]
+        self.probe_heading: float | None = None  # the heading it asks [rad]
+        self.doing = "following the field"  # what the last command did (for the status's reason)
         self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
         # other boats are heard (fleet): following the field and a boat that needs way go velocity-only, as the
         # separation filter expects; a boat that turns in place keeps its ahead-or-astern maneuver near a point
@@ -46,9 +51,24 @@ class Helm:
     def reset(self) -> None:
         """A restarted vehicle (maybe another boat): forget how it turns."""
         self.ability = TurnAbility()
+        self.probe_until = self.probe_heading = None
         self.planner.reset()
         self.line.reset()
         self.asked_heading = None
+
+    def probe(self, t: float, heading_rad: float | None) -> Command | None:
+        """At the start of guiding, for up to ``command.probe_turn_s``: speed 0 at a heading ``PROBE_RAD`` off the
+        boat's (velocity + yaw; Rover turns a skid-steer boat on the spot, a rudder boat not at all), until the
+        boat has shown how it turns (estimation/turning.py); None once done (or off, or no heading known)."""
+        if heading_rad is None or self.ability.pivot_seen or self.ability.needs_way:
+            return None
+        if self.probe_until is None:
+            self.probe_until = t + self.cfg.command.probe_turn_s
+            self.probe_heading = wrap_pi(heading_rad + PROBE_RAD)
+        if t >= self.probe_until:
+            return None
+        self.asked_heading = self.probe_heading
+        return np.zeros(2), self.probe_heading
 
     def lookahead_m(self) -> float | None:
         """The pursuit look-ahead for this boat: for a boat that needs way, at least twice its turning radius
@@ -69,6 +89,7 @@ class Helm:
         current_ned: np.ndarray | None,
     ) -> None:
         """The boat's heading, turn rate, ground velocity and the estimated current at vehicle time ``t``."""
+        self.t = t
         if velocity_ned is not None:
             self.speed_mps = float(np.hypot(*velocity_ned))
         if heading_rad is None or turn_rate_radps is None or velocity_ned is None:
@@ -148,9 +169,14 @@ class Helm:
         distance_m: float,
     ) -> Command:
         """The law's decision ``sp`` (guiding, hold, fault) as a setpoint: within the capture radius as near a
-        point, beyond it as following the field; a zero or non-guiding decision goes as it is."""
+        point, beyond it as following the field (after the turn probe, :meth:`probe`); a zero or non-guiding
+        decision goes as it is."""
         if sp.state is not GuidanceState.GUIDING or sp.ground_ned is None:
             return np.asarray(sp.velocity_ned, dtype=float), None
+        probe = self.probe(self.t, heading_rad) if self.t is not None else None
+        self.doing = "asking a turn in place to tell how the boat turns" if probe else "following the field"
+        if probe is not None:
+            return probe
         if distance_m <= self.cfg.arrival.capture_radius_m:
             return self.near(p_ned, sp.ground_ned, heading_rad, current_ned, distance_m)
         return self.follow(p_ned, sp, heading_rad, current_ned, distance_m)
@@ -181,6 +207,7 @@ class Helm:
             water_mps=self.water_mps,
             bias_ned=bias_ned,
             outside=self.law.outside_area,
+            t=self.t,
         )
         return self._maneuver(m)
 

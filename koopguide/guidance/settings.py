@@ -83,6 +83,7 @@ class CommandSettings:
     max_speed_mps: Annotated[float, Range(0.0, 20.0, lo_open=True)]
     min_speed_mps: Speed
     turn_speed_mps: Speed  # a boat that needs way to turn (a rudder boat) keeps at least this while turning
+    probe_turn_s: Annotated[float, Range(0.0, 30.0)]  # at the start, ask a turn in place this long at most (0: off)
     turn_slowdown: bool
     current_compensation: bool
     lookahead_m: Distance

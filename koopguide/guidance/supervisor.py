@@ -293,7 +293,7 @@ class Supervisor:
             v, yaw = self.helm.command(p, sp, heading, current, distance)
             state, reason = (
                 sp.state,
-                sp.reason or f"{self.back_reason}following the field, {distance:.2f} m from the goal",
+                sp.reason or f"{self.back_reason}{self.helm.doing}, {distance:.2f} m from the goal",
             )
         return self._out(tuple(v), state, reason, True, now, requests, yaw)
 

@@ -13,7 +13,8 @@ asked to turn, i.e. while the heading it was sent differs from its heading by mo
 * turn rate [rad/s]: the fastest turn seen while asked to turn, fading with ``FADE_S`` (a floor of
   ``RATE_FLOOR`` before any turn is seen), used to cap the speed near a point (see law/maneuver.py);
 * turning radius [m]: speed through the water over turn rate, ``u / |r|``, averaged over turns at speed
-  (``FAST_MPS`` and faster), the radius the pursuit's look-ahead must exceed.
+  (``FAST_MPS`` to ``MANOEUVRE_MAX_MPS``: manoeuvring speeds, where a rudder boat's circle is widest), the
+  radius the pursuit's look-ahead must exceed and the planned approach plans with.
 
 Conventions: speeds through the water along the heading [m/s], turn rates [rad/s], vehicle seconds.
 """
@@ -26,6 +27,9 @@ ASKED_RAD = math.radians(40.0)  # a heading error this large asks for a hard tur
 STILL_MPS = 0.02  # slower than this through the water: "still" (a turn then is a turn in place) [m/s]
 SLOW_MPS = 0.06  # slower than this through the water: "at a crawl" [m/s]
 FAST_MPS = 0.08  # turns at this speed or faster measure the turning radius [m/s]
+MANOEUVRE_MAX_MPS = 0.22  # ... and at most this fast: the circle at manoeuvring speed, where a rudder boat's is
+# widest (its rudder force grows with the speed squared, the yaw damping it works against less), not the one of a
+# turn at full speed along the field [m/s]
 PIVOT_RATE = math.radians(3.0)  # a turn this fast at a crawl is a turn in place [rad/s]
 STUCK_RATE = math.radians(2.0)  # slower than this at a crawl while asked to turn: no turn without way [rad/s]
 STUCK_S = 2.0  # ... for this long in a row [s]
@@ -71,7 +75,7 @@ class TurnAbility:
             self.pivot_seen, self.needs_way = True, False
         if self._stuck_since is not None and t - self._stuck_since >= STUCK_S:
             self.needs_way = True
-        if u >= FAST_MPS and r > 1e-6 and u / r <= MAX_RADIUS_M:
+        if FAST_MPS <= u <= MANOEUVRE_MAX_MPS and r > 1e-6 and u / r <= MAX_RADIUS_M:
             radius = u / r
             self.radius_m = (
                 radius if self.radius_m is None else self.radius_m + RADIUS_WEIGHT * (radius - self.radius_m)

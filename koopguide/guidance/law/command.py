@@ -28,6 +28,7 @@ from functools import cached_property
 
 import numpy as np
 
+from koopguide.guidance.law.area import outside_area
 from koopguide.guidance.law.field_distance import field_distance_table
 from koopguide.guidance.law.frames import ModelFrame
 from koopguide.guidance.settings import (
@@ -137,18 +138,10 @@ class GuidanceLaw:
         along = inside[0] if inside is not None else float(np.hypot(*(x0 - self.frame.goal_model)))
         return (along + float(np.hypot(*(x - x0)))) * self.frame.scale
 
-    def outside_area(self, p_ned: np.ndarray) -> float:
-        """How far ``p_ned`` [m] lies outside the model's domain or the geofence (when one is set) [m], 0 inside: the
-        area in which the boat may manoeuvre (where a tank's walls or a shore may be, the service does not know)."""
-        p = np.asarray(p_ned, dtype=float)
-        x = self.frame.to_model(p)
-        out = float(np.hypot(*(np.maximum(self.domain_lo - x, 0.0) + np.maximum(x - self.domain_hi, 0.0))))
-        out *= self.frame.scale
-        fence = self.failsafe.geofence_ned
-        if fence is not None:
-            lo, hi = np.array([f[0] for f in fence]), np.array([f[1] for f in fence])
-            out = max(out, float(np.hypot(*(np.maximum(lo - p, 0.0) + np.maximum(p - hi, 0.0)))))
-        return out
+    def outside_area(self, p_ned: np.ndarray) -> np.ndarray | float:
+        """How far points ``(K, 2)`` (or one ``(2,)``) [m] lie outside the area to manoeuvre in [m] (law/area.py)."""
+        out = outside_area(p_ned, self.frame, self.domain_lo, self.domain_hi, self.failsafe.geofence_ned)
+        return float(out[0]) if np.ndim(p_ned) == 1 else out
 
     def field_velocity_ned(self, p_ned: np.ndarray) -> np.ndarray:
         """The scaled field velocity at ``p_ned`` [m/s] (the paper's rule; may contain NaN from a bad model)."""

@@ -41,6 +41,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from koopguide.guidance.law.approach_path import ApproachPath
 from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, wrap_pi
 
 MIN_DELTA_M = 0.3  # the smallest LOS look-ahead [m]
@@ -51,6 +52,9 @@ FLIP_M = 0.03  # on the line: ahead <-> astern once the goal is this far behind 
 LEASH_M = 0.3  # while turning (a K-turn): the boat goes on this far past the goal before it reverses [m]
 TURNING_RAD = math.radians(20.0)  # a heading error this large is a turn: keep way on
 K_TURN_RAD = math.radians(45.0)  # ... and this large a K-turn about the goal
+HOLD_CROSS_M, HOLD_RAD, HOLD_ALONG_M = 0.1, math.radians(25.0), 0.6  # on the line near the goal: feedback only
+LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.2, math.radians(45.0), 0.8  # ... until beyond these: a planned approach
+END_OFFSETS = (0.0, math.radians(15.0), math.radians(-15.0))  # planned final headings about each end of the line
 SWAP_RAD = math.radians(30.0)  # hysteresis of the bow's end of the line (past 90 deg + this, the ends swap)
 EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed (or EDGE_MIN_M) leaves the area
 EDGE_MIN_M = 0.15  # [m]
@@ -76,9 +80,13 @@ class LineApproach:
         self.travel: float | None = None  # toward the goal along the line: +1 along the axis, -1 against it
         self.astern = False  # the boat is to move stern first (on the line: travel -1; in a K-turn: by legs)
         self.pivot: np.ndarray | None = None  # where the K-turn under way began [m]
+        self.path = ApproachPath(way_mps, max_speed_mps)  # a planned approach onto the line, while far from it
+        self.holding = False  # on the line near the goal: feedback only (hysteresis on HOLD_* / LEAVE_*)
 
     def reset(self) -> None:
         self.axis_rad, self.astern, self.in_current, self.travel, self.pivot = None, False, False, None, None
+        self.path.reset()
+        self.holding = False
 
     def aim(self, p_ned: np.ndarray, goal_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None) -> None:
         """Choose the line: along the current (the end nearest the one held, so that the line turns with the current
@@ -108,13 +116,15 @@ class LineApproach:
         water_mps: float = 0.0,
         bias_ned: np.ndarray | None = None,
         outside: Callable[[np.ndarray], float] | None = None,
+        t: float | None = None,
     ) -> Maneuver:
         """Heading and signed speed toward the goal along the line, steering out the cross-track error.
 
         ``speed_mps``: the boat's ground speed (how far ahead to look for the area's edge); ``water_mps``: its
         speed through the water along its heading (negative: astern); ``bias_ned``: the station keeper's
-        integral term [m/s] (law/station.py), added along the heading; ``outside``: how far a point lies
-        outside the area the boat may use [m] (0 inside; None: no limit)."""
+        integral term [m/s] (law/station.py), added along the heading; ``outside``: how far points ``(K, 2)``
+        lie outside the area the boat may use [m] (0 inside; None: no limit); ``t``: vehicle time [s] (None: no
+        planned approach, feedback only)."""
         if self.axis_rad is None:
             raise ValueError("LineApproach.command before aim()")
         p = np.asarray(p_ned, dtype=float)
@@ -122,6 +132,12 @@ class LineApproach:
         n = np.array([-a[1], a[0]])
         e = p - np.asarray(goal_ned, dtype=float)
         along, cross = float(e @ a), float(e @ n)  # [m] ahead of the goal along the axis, to its right
+        planned = None if t is None else self._planned(t, p, goal_ned, heading_rad, radius_m, along, cross, outside)
+        if planned is not None:
+            return self._finish(planned, heading_rad, current_ned, water_mps)
+        a = unit(self.axis_rad)
+        n = np.array([-a[1], a[0]])
+        along, cross = float(e @ a), float(e @ n)
         delta = min(MAX_DELTA_M, max(MIN_DELTA_M, radius_m if radius_m is not None else DEFAULT_RADIUS_M))
         h = unit(heading_rad)
         # which way along the line to the goal (the bow lies along +a, so +1 is ahead): past the goal by the leash
@@ -139,12 +155,13 @@ class LineApproach:
             return (not inward(travel), abs(wrap_pi(self._heading(travel, delta, a, n, cross) - heading_rad)))
 
         if self.travel is None:  # toward the goal along the line; level with it, the smaller turn that stays inside
-            far = abs(along) > max(LEASH_M, abs(cross))
+            far = abs(along) > (FLIP_M if self.holding else max(LEASH_M, abs(cross)))
             self.travel = (-1.0 if along > 0.0 else 1.0) if far else min((1.0, -1.0), key=effort)
         target = self._heading(self.travel, delta, a, n, cross)
         # off the line, where along the line the boat meets it matters less than getting there: past the goal by as
         # much as it still has to go across
-        leash = FLIP_M if on_line and abs(wrap_pi(target - heading_rad)) <= TURNING_RAD else max(LEASH_M, abs(cross))
+        aligned = on_line and abs(wrap_pi(target - heading_rad)) <= TURNING_RAD
+        leash = FLIP_M if self.holding or aligned else max(LEASH_M, abs(cross))
         if self.travel > 0 and along > leash:
             self.travel = -1.0
         elif self.travel < 0 and along < -leash:
@@ -180,6 +197,53 @@ class LineApproach:
         s = min(self.max_speed, max(-self.max_speed, s))
         if s * sign < MIN_SPEED_MPS:  # toward the goal the other way than the boat is going: let it lie
             s = 0.0
+        return self._finish(Maneuver(heading, s, self.astern), heading_rad, current_ned, water_mps)
+
+    def _planned(
+        self,
+        t: float,
+        p: np.ndarray,
+        goal_ned: np.ndarray,
+        heading_rad: float,
+        radius_m: float | None,
+        along: float,
+        cross: float,
+        outside: Callable[[np.ndarray], float] | None,
+    ) -> Maneuver | None:
+        """Far from the line or facing off it: the planned approach's command (law/approach_path.py), planned
+        anew when there is none; None on the line near the goal (feedback holds the boat there), or before the
+        boat's turning circle has been measured."""
+        if radius_m is None:  # its turning circle not yet seen: nothing to plan with
+            return None
+        facing = abs(wrap_pi(heading_rad - self.axis_rad))
+        if self.holding:
+            self.holding = abs(cross) <= LEAVE_CROSS_M and facing <= LEAVE_RAD and abs(along) <= LEAVE_ALONG_M
+        else:
+            self.holding = abs(cross) <= HOLD_CROSS_M and facing <= HOLD_RAD and abs(along) <= HOLD_ALONG_M
+        if self.holding:
+            self.path.reset()
+            return None
+        m = self.path.command(t, p, heading_rad) if self.path.active else None
+        if m is None:
+            ends = None
+            if self.in_current:  # either end of the current's line, or a little off it (the hold steers out the rest)
+                ends = tuple(
+                    wrap_pi(end + off) for end in (self.axis_rad, self.axis_rad + math.pi) for off in END_OFFSETS
+                )
+            if not self.path.plan(t, p, heading_rad, np.asarray(goal_ned, dtype=float), ends, radius_m, outside):
+                return None
+            final = self.path.final_heading  # the bow's end of the line: the path's
+            if self.in_current:
+                final = min((self.axis_rad, wrap_pi(self.axis_rad + math.pi)), key=lambda a: abs(wrap_pi(a - final)))
+            self.axis_rad, self.travel = final, None
+            m = self.path.command(t, p, heading_rad)
+        return m
+
+    @staticmethod
+    def _finish(m: Maneuver, heading_rad: float, current_ned: np.ndarray | None, water_mps: float) -> Maneuver:
+        """The rules every command obeys: drift where the rudder would misread the speed, and hold the heading
+        while a reversal stops the boat."""
+        heading, s = m.heading_rad, m.speed_mps
         if s != 0.0 and current_ned is not None:
             water = s - float(np.asarray(current_ned, dtype=float) @ unit(heading))  # through the water along it
             if water * s < 0.0:  # over ground one way, the water past the rudder the other: drift instead
@@ -188,7 +252,7 @@ class LineApproach:
             # still moving the old way after a reversal: hold the heading while it stops (until the water passes
             # the rudder the new way the rudder turns it the wrong way, whichever way the autopilot sets it)
             heading = heading_rad
-        return Maneuver(heading, s, self.astern)
+        return Maneuver(heading, s, m.astern)
 
     @staticmethod
     def _heading(sign: float, delta: float, a: np.ndarray, n: np.ndarray, cross: float) -> float:

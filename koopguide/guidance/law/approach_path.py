@@ -1,0 +1,138 @@
+"""A planned approach for a boat that needs way to turn: a Reeds-Shepp path onto the holding line, and a
+tracker for it (pure math, no I/O).
+
+Where the boat is far off the line it will hold, or faces far off it, feedback alone (law/line_approach.py)
+makes slow progress in a tight space: a boat that turns on a circle of radius R ~ 1.5 m cannot make a U-turn
+in a 3 m tank. A car's answer is a planned manoeuvre with reversals, and Reeds & Shepp (1990) give the
+shortest one between two poses (law/reeds_shepp.py). Here:
+
+* the path ends at the goal with the bow along the holding line (either end of a current's line, or in
+  still water any of ``CALM_HEADINGS``: a boat in still water holds in any heading) and stays within the
+  area the boat may use (the model's domain and the geofence, ``AREA_SLACK_M`` of slack); the cheapest is
+  kept, length plus ``CUSP_COST_M`` per reversal;
+* it is planned on a circle a little wider than the boat's measured one (``RADIUS_MARGIN``; the boat's circle
+  widens as it slows), and tracked by pure pursuit of the point ``LOOK_M`` along it within the present run
+  (the part between two reversals; astern the bow points away from that point), at the speed that stops the
+  boat at the run's end (``STOP_GAIN`` per metre still to go, at most ``cruise``);
+* a boat that drifts off the path (``REPLAN_M``), faces far off it (``REPLAN_RAD``), or has tracked one plan
+  for ``REPLAN_S``, gets a new one from where it is.
+
+Conventions: positions local NED [m], headings [rad] from north, speeds over ground along the heading [m/s],
+vehicle seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from koopguide.guidance.law import reeds_shepp
+from koopguide.guidance.law.maneuver import Maneuver, wrap_pi
+
+STEP_M = 0.05  # path sample spacing [m]
+CUSP_COST_M = 0.5  # a reversal costs as much as this much more path [m]
+AREA_SLACK_M = 0.1  # a path may leave the area by this much (or by what the boat is already outside) [m]
+RADIUS_MARGIN = 1.1  # plan on a circle this much wider than the boat's measured one
+MIN_RADIUS_M, MAX_RADIUS_M = 1.0, 2.5  # [m]
+CALM_HEADINGS = 8  # final headings tried in still water (every 360 / 8 deg)
+LOOK_M = 0.3  # pure-pursuit look-ahead along the path [m]
+STOP_GAIN = 0.6  # speed per metre still to go to the run's end [1/s]
+MIN_SPEED_MPS = 0.04  # on a run, never slower than this [m/s]
+RUN_END_M = 0.06  # a run counts as driven once its end is this close [m]
+REPLAN_M = 0.15  # off the path by more than this: plan again [m]
+REPLAN_RAD = math.radians(35.0)  # facing off the path by more than this: plan again
+REPLAN_S = 20.0  # plan again after this long on one path [s]
+SEARCH = 40  # samples searched ahead for the boat's progress along the run
+
+
+class ApproachPath:
+    """Plan with :meth:`plan`, then call :meth:`command` each tick (None: no path, or its end reached)."""
+
+    def __init__(self, cruise_mps: float, max_speed_mps: float) -> None:
+        self.cruise = min(cruise_mps, max_speed_mps)
+        self.samples: list[tuple[float, float, float, float]] = []  # (N, E, heading, direction)
+        self.i = 0  # progress along the samples
+        self.t_planned: float | None = None
+        self.final_heading: float | None = None  # the bow's direction at the path's end [rad]
+
+    def reset(self) -> None:
+        self.samples, self.i, self.t_planned, self.final_heading = [], 0, None, None
+
+    @property
+    def active(self) -> bool:
+        return bool(self.samples)
+
+    def plan(
+        self,
+        t: float,
+        p_ned: np.ndarray,
+        heading_rad: float,
+        goal_ned: np.ndarray,
+        final_headings: tuple[float, ...] | None,
+        radius_m: float | None,
+        outside: Callable[[np.ndarray], np.ndarray] | None,
+    ) -> bool:
+        """Plan from the boat's pose to the goal, the bow at the end along one of ``final_headings`` (None: any,
+        still water); False (and no path) when none stays in the area. ``outside``: how far each of ``(K, 2)``
+        NED points lies outside the area [m] (0 inside)."""
+        self.reset()
+        r = min(MAX_RADIUS_M, max(MIN_RADIUS_M, RADIUS_MARGIN * (radius_m if radius_m is not None else 1.4)))
+        if final_headings is None:
+            final_headings = tuple(2.0 * math.pi * k / CALM_HEADINGS for k in range(CALM_HEADINGS))
+        start = (float(p_ned[0]), float(p_ned[1]), heading_rad)
+        goal = (float(goal_ned[0]), float(goal_ned[1]))
+        here = 0.0 if outside is None else float(outside(np.asarray(p_ned, dtype=float)[None, :])[0])
+        allowed = AREA_SLACK_M + here
+        candidates = [
+            (path.length_m + CUSP_COST_M * path.cusps, k, path, final)
+            for k, final in enumerate(final_headings)
+            for path in reeds_shepp.plan(start, (*goal, final), r)
+        ]
+        for _, _, path, final in sorted(candidates, key=lambda c: c[:2]):  # the cheapest that stays in the area
+            samples = path.sample(STEP_M)
+            if outside is None or float(np.max(outside(np.array([s[:2] for s in samples])))) <= allowed:
+                self.samples, self.t_planned, self.final_heading = samples, t, final
+                return True
+        return False
+
+    def _run_end(self, i: int) -> int:
+        """Index of the last sample of the run that sample ``i`` belongs to (up to the next reversal)."""
+        d = self.samples[i][3]
+        j = i
+        while j + 1 < len(self.samples) and self.samples[j + 1][3] == d:
+            j += 1
+        return j
+
+    def command(self, t: float, p_ned: np.ndarray, heading_rad: float) -> Maneuver | None:
+        """Heading and signed speed along the path; None when there is none, the boat has left it (plan again)
+        or reached its end."""
+        if not self.samples:
+            return None
+        p = np.asarray(p_ned, dtype=float)
+        end = self._run_end(self.i)
+        window = range(self.i, min(end, self.i + SEARCH) + 1)
+        self.i = min(window, key=lambda k: math.hypot(self.samples[k][0] - p[0], self.samples[k][1] - p[1]))
+        to_end = math.hypot(self.samples[end][0] - p[0], self.samples[end][1] - p[1])
+        if to_end <= RUN_END_M or self.i == end:  # this run is driven: on to the next, or done
+            if end + 1 >= len(self.samples):
+                self.reset()
+                return None
+            self.i = end + 1
+            end = self._run_end(self.i)
+        n, e, path_heading, direction = self.samples[self.i]
+        off = math.hypot(n - p[0], e - p[1])
+        if off > REPLAN_M or abs(wrap_pi(path_heading - heading_rad)) > REPLAN_RAD or t - self.t_planned > REPLAN_S:
+            self.reset()
+            return None
+        remaining = STEP_M * (end - self.i)  # along the path to the run's end [m]
+        k = min(end, self.i + max(1, round(LOOK_M / STEP_M)))
+        aim = np.array(self.samples[k][:2]) - p
+        if float(np.hypot(*aim)) < 1e-6:
+            course = path_heading if direction > 0 else wrap_pi(path_heading + math.pi)
+        else:
+            course = math.atan2(aim[1], aim[0])
+        heading = course if direction > 0 else wrap_pi(course + math.pi)
+        speed = min(self.cruise, max(MIN_SPEED_MPS, STOP_GAIN * remaining))
+        return Maneuver(heading, direction * speed, direction < 0)
