@@ -12,7 +12,8 @@ asked to turn, i.e. while the heading it was sent differs from its heading by mo
   Rover skid-steer default); evidence of the other kind replaces it;
 * turn rate [rad/s]: the fastest turn seen while asked to turn, fading with ``FADE_S`` (a floor of
   ``RATE_FLOOR`` before any turn is seen), used to cap the speed near a point (see law/maneuver.py);
-* turning radius [m]: speed through the water over turn rate, ``u / |r|``, averaged over turns at speed
+* turning radius [m]: speed through the water over turn rate, ``u / |r|``, the tightest seen (relaxing with
+  ``RADIUS_RELAX_S``) in hard turns asked for ``RADIUS_SETTLE_S`` at least, at speed
   (``FAST_MPS`` to ``MANOEUVRE_MAX_MPS``: manoeuvring speeds, where a rudder boat's circle is widest), the
   radius the pursuit's look-ahead must exceed and the planned approach plans with.
 
@@ -36,7 +37,8 @@ STUCK_S = 2.0  # ... for this long in a row [s]
 PIVOT_S = 1.0  # a turn in place is one that lasts this long [s]
 RATE_FLOOR = math.radians(4.0)  # the turn rate assumed before any hard turn is seen [rad/s]
 FADE_S = 60.0  # the fastest turn seen fades with this time constant [s]
-RADIUS_WEIGHT = 0.05  # weight of each new turning-radius sample in the running mean
+RADIUS_SETTLE_S = 1.5  # a hard turn measures the radius only once it has been asked this long (the rudder over) [s]
+RADIUS_RELAX_S = 60.0  # the tightest circle seen widens again with this time constant (a boat that changed) [s]
 MAX_RADIUS_M = 20.0  # a larger u / |r| is not a turn (noise around straight running) [m]
 
 
@@ -51,6 +53,7 @@ class TurnAbility:
         self.radius_m: float | None = None  # turning radius at speed [m]; None before a turn at speed
         self._stuck_since: float | None = None
         self._pivot_since: float | None = None
+        self._asked_since: float | None = None  # vehicle time the hard turn under way was first asked [s]
         self._t: float | None = None
 
     def update(self, t: float, asked_error_rad: float | None, speed_water_mps: float, turn_rate_radps: float) -> None:
@@ -63,8 +66,9 @@ class TurnAbility:
         self.turn_rate = max(RATE_FLOOR, self.turn_rate * math.exp(-dt / FADE_S))
         asked = asked_error_rad is not None and abs(asked_error_rad) >= ASKED_RAD
         if not asked:
-            self._stuck_since = self._pivot_since = None
+            self._stuck_since = self._pivot_since = self._asked_since = None
             return
+        self._asked_since = t if self._asked_since is None else self._asked_since
         u, r = abs(speed_water_mps), abs(turn_rate_radps)
         self.turn_rate = max(self.turn_rate, r)
         pivoting = u < STILL_MPS and r >= PIVOT_RATE
@@ -75,8 +79,10 @@ class TurnAbility:
             self.pivot_seen, self.needs_way = True, False
         if self._stuck_since is not None and t - self._stuck_since >= STUCK_S:
             self.needs_way = True
-        if FAST_MPS <= u <= MANOEUVRE_MAX_MPS and r > 1e-6 and u / r <= MAX_RADIUS_M:
+        settled = t - self._asked_since >= RADIUS_SETTLE_S
+        if settled and FAST_MPS <= u <= MANOEUVRE_MAX_MPS and r > 1e-6 and u / r <= MAX_RADIUS_M:
             radius = u / r
-            self.radius_m = (
-                radius if self.radius_m is None else self.radius_m + RADIUS_WEIGHT * (radius - self.radius_m)
-            )
+            # the tightest circle seen (transients, the rudder still going over, the turn rate still growing, all
+            # read wider than the boat can turn), relaxing slowly
+            relaxed = None if self.radius_m is None else self.radius_m * (1.0 + dt / RADIUS_RELAX_S)
+            self.radius_m = radius if relaxed is None else min(radius, relaxed)

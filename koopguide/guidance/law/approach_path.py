@@ -6,14 +6,14 @@ makes slow progress in a tight space: a boat that turns on a circle of radius R 
 in a 3 m tank. A car's answer is a planned manoeuvre with reversals, and Reeds & Shepp (1990) give the
 shortest one between two poses (law/reeds_shepp.py). Here:
 
-* the path ends at the goal with the bow along the holding line (either end of a current's line, or in
-  still water any of ``CALM_HEADINGS``: a boat in still water holds in any heading) and stays within the
-  area the boat may use (the model's domain and the geofence, ``AREA_SLACK_M`` of slack); the cheapest is
-  kept, length plus ``CUSP_COST_M`` per reversal;
+* the path ends at the goal with ``FINAL_M`` straight (ahead or astern), the bow along the holding line
+  (either end of a current's line, or in still water any of ``CALM_HEADINGS``: a boat in still water holds in
+  any heading) and stays within the area the boat may use (the model's domain and the geofence,
+  ``AREA_SLACK_M`` of slack); the cheapest is kept, length plus ``CUSP_COST_M`` per reversal;
 * it is planned on a circle a little wider than the boat's measured one (``RADIUS_MARGIN``; the boat's circle
-  widens as it slows), and tracked by pure pursuit of the point ``LOOK_M`` along it within the present run
-  (the part between two reversals; astern the bow points away from that point), at the speed that stops the
-  boat at the run's end (``STOP_GAIN`` per metre still to go, at most ``cruise``);
+  widens as it slows), and tracked per run (the part between two reversals) by line-of-sight guidance: the
+  path's course ``LOOK_M`` ahead, less atan(offset / ``LOS_DELTA_M``) (astern the bow points opposite the
+  course), at the speed that stops the boat at the run's end (``STOP_GAIN`` per metre still to go, at most ``cruise``);
 * a boat that drifts off the path (``REPLAN_M``), faces far off it (``REPLAN_RAD``), or has tracked one plan
   for ``REPLAN_S``, gets a new one from where it is.
 
@@ -32,17 +32,19 @@ from koopguide.guidance.law import reeds_shepp
 from koopguide.guidance.law.maneuver import Maneuver, wrap_pi
 
 STEP_M = 0.05  # path sample spacing [m]
+FINAL_M = 0.4  # every path ends with this much straight along the final heading (the boat settles its heading) [m]
 CUSP_COST_M = 0.5  # a reversal costs as much as this much more path [m]
 AREA_SLACK_M = 0.1  # a path may leave the area by this much (or by what the boat is already outside) [m]
 RADIUS_MARGIN = 1.1  # plan on a circle this much wider than the boat's measured one
 MIN_RADIUS_M, MAX_RADIUS_M = 1.0, 2.5  # [m]
 CALM_HEADINGS = 8  # final headings tried in still water (every 360 / 8 deg)
-LOOK_M = 0.3  # pure-pursuit look-ahead along the path [m]
+LOOK_M = 0.3  # the path's course is taken this far ahead along it [m]
+LOS_DELTA_M = 0.5  # LOS look-ahead for the offset across the path [m]
 STOP_GAIN = 0.6  # speed per metre still to go to the run's end [1/s]
 MIN_SPEED_MPS = 0.04  # on a run, never slower than this [m/s]
 RUN_END_M = 0.06  # a run counts as driven once its end is this close [m]
-REPLAN_M = 0.15  # off the path by more than this: plan again [m]
-REPLAN_RAD = math.radians(35.0)  # facing off the path by more than this: plan again
+REPLAN_M = 0.3  # off the path by more than this: plan again [m]
+REPLAN_RAD = math.radians(60.0)  # facing off the path by more than this: plan again
 REPLAN_S = 20.0  # plan again after this long on one path [s]
 SEARCH = 40  # samples searched ahead for the boat's progress along the run
 
@@ -85,11 +87,13 @@ class ApproachPath:
         goal = (float(goal_ned[0]), float(goal_ned[1]))
         here = 0.0 if outside is None else float(outside(np.asarray(p_ned, dtype=float)[None, :])[0])
         allowed = AREA_SLACK_M + here
-        candidates = [
-            (path.length_m + CUSP_COST_M * path.cusps, k, path, final)
-            for k, final in enumerate(final_headings)
-            for path in reeds_shepp.plan(start, (*goal, final), r)
-        ]
+        candidates = []
+        for k, final in enumerate(final_headings):
+            for way in (1.0, -1.0):  # the last FINAL_M ahead or astern, straight along the final heading
+                pre = (goal[0] - way * FINAL_M * math.cos(final), goal[1] - way * FINAL_M * math.sin(final), final)
+                for path in reeds_shepp.plan(start, pre, r):
+                    whole = reeds_shepp.Path(start, r, (*path.segments, ("S", way * FINAL_M / r)))
+                    candidates.append((whole.length_m + CUSP_COST_M * whole.cusps, k, whole, final))
         for _, _, path, final in sorted(candidates, key=lambda c: c[:2]):  # the cheapest that stays in the area
             samples = path.sample(STEP_M)
             if outside is None or float(np.max(outside(np.array([s[:2] for s in samples])))) <= allowed:
@@ -127,12 +131,13 @@ class ApproachPath:
             self.reset()
             return None
         remaining = STEP_M * (end - self.i)  # along the path to the run's end [m]
-        k = min(end, self.i + max(1, round(LOOK_M / STEP_M)))
-        aim = np.array(self.samples[k][:2]) - p
-        if float(np.hypot(*aim)) < 1e-6:
-            course = path_heading if direction > 0 else wrap_pi(path_heading + math.pi)
-        else:
-            course = math.atan2(aim[1], aim[0])
+        # LOS along the path (Fossen (2021) 12.4.2): the course of the path LOOK_M ahead within the run, less the
+        # angle that steers out the offset across the path's own course here
+        motion = path_heading if direction > 0 else wrap_pi(path_heading + math.pi)  # course over the path
+        ahead_course = self.samples[min(end, self.i + max(1, round(LOOK_M / STEP_M)))][2]
+        ahead_course = ahead_course if direction > 0 else wrap_pi(ahead_course + math.pi)
+        across = -math.sin(motion) * (p[0] - n) + math.cos(motion) * (p[1] - e)  # to the right of the course [m]
+        course = wrap_pi(ahead_course - math.atan2(across, LOS_DELTA_M))
         heading = course if direction > 0 else wrap_pi(course + math.pi)
         speed = min(self.cruise, max(MIN_SPEED_MPS, STOP_GAIN * remaining))
         return Maneuver(heading, direction * speed, direction < 0)

@@ -52,9 +52,11 @@ FLIP_M = 0.03  # on the line: ahead <-> astern once the goal is this far behind 
 LEASH_M = 0.3  # while turning (a K-turn): the boat goes on this far past the goal before it reverses [m]
 TURNING_RAD = math.radians(20.0)  # a heading error this large is a turn: keep way on
 K_TURN_RAD = math.radians(45.0)  # ... and this large a K-turn about the goal
-HOLD_CROSS_M, HOLD_RAD, HOLD_ALONG_M = 0.1, math.radians(25.0), 0.6  # on the line near the goal: feedback only
-LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.2, math.radians(45.0), 0.8  # ... until beyond these: a planned approach
-END_OFFSETS = (0.0, math.radians(15.0), math.radians(-15.0))  # planned final headings about each end of the line
+HOLD_CROSS_M, HOLD_RAD, HOLD_ALONG_M = 0.1, math.radians(40.0), 0.6  # on the line near the goal: feedback only
+LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.4, math.radians(60.0), 0.8  # ... until beyond these: a planned approach
+HOLD_WAY_MPS = 0.06  # holding in a current, turning: at least this over ground into it [m/s]
+HOLD_MAX_MPS = 0.1  # ... and never more than this [m/s]
+END_OFFSETS = (0.0,)  # planned final headings about each end of the line
 SWAP_RAD = math.radians(30.0)  # hysteresis of the bow's end of the line (past 90 deg + this, the ends swap)
 EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed (or EDGE_MIN_M) leaves the area
 EDGE_MIN_M = 0.15  # [m]
@@ -154,6 +156,13 @@ class LineApproach:
         def effort(travel: float) -> tuple[bool, float]:  # out of the area first, then the larger turn
             return (not inward(travel), abs(wrap_pi(self._heading(travel, delta, a, n, cross) - heading_rad)))
 
+        if self.holding and self.in_current and current_ned is not None:
+            return self._finish(
+                self._hold_in_current(p, goal_ned, heading_rad, delta, a, n, cross, current_ned, bias_ned),
+                heading_rad,
+                current_ned,
+                water_mps,
+            )
         if self.travel is None:  # toward the goal along the line; level with it, the smaller turn that stays inside
             far = abs(along) > (FLIP_M if self.holding else max(LEASH_M, abs(cross)))
             self.travel = (-1.0 if along > 0.0 else 1.0) if far else min((1.0, -1.0), key=effort)
@@ -198,6 +207,38 @@ class LineApproach:
         if s * sign < MIN_SPEED_MPS:  # toward the goal the other way than the boat is going: let it lie
             s = 0.0
         return self._finish(Maneuver(heading, s, self.astern), heading_rad, current_ned, water_mps)
+
+    def _hold_in_current(
+        self,
+        p: np.ndarray,
+        goal_ned: np.ndarray,
+        heading_rad: float,
+        delta: float,
+        a: np.ndarray,
+        n: np.ndarray,
+        cross: float,
+        current_ned: np.ndarray,
+        bias_ned: np.ndarray | None,
+    ) -> Maneuver:
+        """On the current's line near the goal: into the current only, ahead (bow upstream) or astern (bow
+        downstream), never the other way (that would turn the water past the rudder round), at most
+        ``HOLD_MAX_MPS`` over ground; upstream of the goal speed 0 (Rover's stop controller, throttle off): the
+        current carries the boat back, and with no water passing it, it neither turns nor slips across."""
+        c = np.asarray(current_ned, dtype=float)
+        up = -c / float(np.hypot(*c))
+        self.travel = 1.0 if float(a @ up) > 0.0 else -1.0
+        self.astern = self.travel < 0
+        heading = self._heading(self.travel, delta, a, n, cross)
+        to_go = float((np.asarray(goal_ned, dtype=float) - p) @ up)  # how far the goal lies upstream [m]
+        if to_go < -FLIP_M:  # upstream of the goal: speed 0, the current carries the boat back
+            return Maneuver(heading, 0.0, self.astern)
+        s = self.gain * math.hypot(max(to_go, 0.0), cross)
+        if bias_ned is not None:
+            s += self.travel * float(np.asarray(bias_ned, dtype=float) @ unit(heading))
+        if abs(wrap_pi(heading - heading_rad)) > TURNING_RAD:
+            s = max(s, HOLD_WAY_MPS)  # the current's flow past the rudder and a little more
+        s = min(HOLD_MAX_MPS, s)
+        return Maneuver(heading, self.travel * max(s, MIN_SPEED_MPS), self.astern)
 
     def _planned(
         self,
