@@ -23,6 +23,9 @@ from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, wrap_pi
 from koopguide.guidance.settings import GuidanceConfig
 
 PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.probe_turn_s)
+PROBE_REACHED_RAD = math.radians(10.0)  # the probe's heading reached this close: the boat turned in place
+PROBE_WAY_RAD = math.radians(90.0)  # ... and the turn under way asked of a boat that needs way, for its circle
+LINE_CURRENT_SIGMAS = 3.0  # a current estimate this many of its standard deviations strong sets the holding line
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
 Command = tuple[np.ndarray, float | None]  # (velocity NED [m/s], yaw [rad] or None for velocity only)
 
@@ -40,8 +43,10 @@ class Helm:
         self.speed_mps = 0.0  # the boat's ground speed at the last observation [m/s]
         self.water_mps = 0.0  # ... and its speed through the water along its heading (negative: astern) [m/s]
         self.t: float | None = None  # vehicle time of the last observation [s]
+        self.current_std = 0.0  # the current estimate's spread [m/s]
         self.probe_until: float | None = None  # vehicle time the turn probe ends [s]
         self.probe_heading: float | None = None  # the heading it asks [rad]
+        self.probe_with_way = False  # the probe's second stage (a boat that needs way: a hard turn under way)
         self.doing = "following the field"  # what the last command did (for the status's reason)
         self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
         # other boats are heard (fleet): following the field and a boat that needs way go velocity-only, as the
@@ -52,6 +57,7 @@ class Helm:
         """A restarted vehicle (maybe another boat): forget how it turns."""
         self.ability = TurnAbility()
         self.probe_until = self.probe_heading = None
+        self.probe_with_way = False
         self.planner.reset()
         self.line.reset()
         self.asked_heading = None
@@ -59,15 +65,25 @@ class Helm:
     def probe(self, t: float, heading_rad: float | None) -> Command | None:
         """At the start of guiding, for up to ``command.probe_turn_s``: speed 0 at a heading ``PROBE_RAD`` off the
         boat's (velocity + yaw; Rover turns a skid-steer boat on the spot, a rudder boat not at all), until the
-        boat has shown how it turns (estimation/turning.py); None once done (or off, or no heading known)."""
-        if heading_rad is None or self.ability.pivot_seen or self.ability.needs_way:
+        boat has shown how it turns (estimation/turning.py); a boat that needs way is then asked the same turn at
+        ``command.turn_speed_mps``, for as long again at most, until its turning circle is measured. None once
+        done (or off, or no heading known)."""
+        a = self.ability
+        if heading_rad is None or a.pivot_seen or (a.needs_way and a.radius_m is not None):
             return None
-        if self.probe_until is None:
+        if self.probe_until is None or (a.needs_way and not self.probe_with_way):  # (re)start a stage
+            self.probe_with_way = a.needs_way
             self.probe_until = t + self.cfg.command.probe_turn_s
-            self.probe_heading = wrap_pi(heading_rad + PROBE_RAD)
-        if t >= self.probe_until:
+            self.probe_heading = wrap_pi(heading_rad + (PROBE_WAY_RAD if a.needs_way else PROBE_RAD))
+        if not self.probe_with_way and abs(wrap_pi(heading_rad - self.probe_heading)) <= PROBE_REACHED_RAD:
+            a.pivot_seen = True  # it turned as asked without way: it turns in place
+        if t >= self.probe_until or a.pivot_seen:
             return None
         self.asked_heading = self.probe_heading
+        if self.probe_with_way:  # ahead, velocity only: Rover steers to its direction at its speed
+            return self.cfg.command.turn_speed_mps * np.array(
+                [math.cos(self.probe_heading), math.sin(self.probe_heading)]
+            ), None
         return np.zeros(2), self.probe_heading
 
     def lookahead_m(self) -> float | None:
@@ -87,9 +103,11 @@ class Helm:
         turn_rate_radps: float | None,
         velocity_ned: np.ndarray | None,
         current_ned: np.ndarray | None,
+        current_std_mps: float = 0.0,
     ) -> None:
-        """The boat's heading, turn rate, ground velocity and the estimated current at vehicle time ``t``."""
-        self.t = t
+        """The boat's heading, turn rate, ground velocity and the estimated current (and its spread) at vehicle
+        time ``t``."""
+        self.t, self.current_std = t, current_std_mps
         if velocity_ned is not None:
             self.speed_mps = float(np.hypot(*velocity_ned))
         if heading_rad is None or turn_rate_radps is None or velocity_ned is None:
@@ -195,7 +213,13 @@ class Helm:
         self, p_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None, bias_ned: np.ndarray | None = None
     ) -> Command:
         c = self._current(current_ned)
-        c = c if c is not None and float(np.hypot(*c)) >= CURRENT_MIN_MPS else None
+        # the line follows a current only once the estimate is clear of its own spread (early on, its direction
+        # swings with every turn, and so would the line)
+        c = (
+            c
+            if c is not None and float(np.hypot(*c)) >= max(CURRENT_MIN_MPS, LINE_CURRENT_SIGMAS * self.current_std)
+            else None
+        )
         self.line.aim(p_ned, self.law.goal_ned, heading_rad, c)
         m = self.line.command(
             p_ned,

@@ -132,8 +132,8 @@ class Supervisor:
         return True
 
     def update_current(self, t: float) -> None:
-        """After the command (the current changes over tens of seconds): the fix at ``t`` into the current."""
-        self.vehicle.update_current(t)
+        """After the command: the fix at ``t`` into the current (all of it while disarmed: the boat drifts)."""
+        self.vehicle.update_current(t, drifting=self.armed is False)
 
     def on_clock_restart(self, restart: ev.ClockRestart) -> None:
         what = "went back (a reboot)" if restart.rebooted else "jumped forward"
@@ -249,7 +249,7 @@ class Supervisor:
         estimator = self.vehicle.current
         current = estimator.current_ned if heading is not None and estimator.updates else None
         rate = self.vehicle.attitude[2] if heading is not None and self.vehicle.attitude else None
-        self.helm.observe(now, heading, rate, v_est, current)
+        self.helm.observe(now, heading, rate, v_est, current, estimator.std_mps)
         self.helm.in_company = self.cfg.fleet.enabled and bool(self.neighbours.latest)
         distance = law.distance_to_goal(p)
         if self.arrived:

@@ -13,7 +13,8 @@ and does not need to be: the autopilot holds the speed over ground along the hea
 Model: state ``c = (c_N, c_E)`` [m/s], a random walk (a current changes slowly along the route);
 prior ``c = 0`` with ``current_prior_std_mps``; measurement ``z = v_ground . n(psi)`` with ``H = n(psi)^T``
 and the fix's velocity noise. Measurements while the boat turns faster than ``current_max_turn_dps`` are
-skipped: in a turn the hull does slip sideways through the water, which would read as current.
+skipped: in a turn the hull does slip sideways through the water, which would read as current. A boat that is
+not propelled (disarmed) drifts with the water: then its whole ground velocity measures the current (H = I).
 
 Conventions: velocities NED [m/s], headings [rad] from north, time in vehicle seconds.
 """
@@ -51,9 +52,12 @@ class CurrentEstimator:
         """The estimate's larger standard deviation [m/s] (the prior's until both components are seen)."""
         return float(math.sqrt(max(np.linalg.eigvalsh(self.kf.P))))
 
-    def update(self, t: float, v_ground: np.ndarray, heading_rad: float, turn_rate_radps: float) -> bool:
+    def update(
+        self, t: float, v_ground: np.ndarray, heading_rad: float, turn_rate_radps: float, drifting: bool = False
+    ) -> bool:
         """Fold in the ground velocity (N, E) [m/s] seen at vehicle time ``t`` [s] with the boat's heading
-        and turn rate; False when the measurement was skipped (turning fast, or not finite)."""
+        and turn rate; False when the measurement was skipped (turning fast, or not finite). ``drifting``: the
+        boat is not propelled (disarmed), so its whole ground velocity is the current's."""
         v_ground = np.asarray(v_ground, dtype=float)
         if not (np.all(np.isfinite(v_ground)) and math.isfinite(heading_rad) and math.isfinite(turn_rate_radps)):
             return False
@@ -64,7 +68,10 @@ class CurrentEstimator:
             self.t = t
         if abs(turn_rate_radps) > math.radians(self.settings.current_max_turn_dps):
             return False
-        n = np.array([[-math.sin(heading_rad), math.cos(heading_rad)]])  # across the heading (starboard)
-        self.kf.update(np.array([float(n[0] @ v_ground)]), H=n)
+        if drifting:  # both components at once
+            self.kf.update(v_ground.copy(), R=np.eye(2) * self.settings.velocity_std_mps**2, H=np.eye(2))
+        else:
+            n = np.array([[-math.sin(heading_rad), math.cos(heading_rad)]])  # across the heading (starboard)
+            self.kf.update(np.array([float(n[0] @ v_ground)]), H=n)
         self.updates += 1
         return True
