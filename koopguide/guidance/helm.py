@@ -25,7 +25,7 @@ from koopguide.guidance.settings import GuidanceConfig
 PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.probe_turn_s)
 PROBE_REACHED_RAD = math.radians(10.0)  # the probe's heading reached this close: the boat turned in place
 PROBE_WAY_RAD = math.radians(90.0)  # ... and the turn under way asked of a boat that needs way, for its circle
-LINE_CURRENT_SIGMAS = 3.0  # a current estimate this many of its standard deviations strong sets the holding line
+LINE_CURRENT_SIGMAS = 2.0  # a current estimate this many of its standard deviations strong sets the holding line
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
 Command = tuple[np.ndarray, float | None]  # (velocity NED [m/s], yaw [rad] or None for velocity only)
 

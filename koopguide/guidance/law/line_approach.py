@@ -56,6 +56,7 @@ HOLD_CROSS_M, HOLD_RAD, HOLD_ALONG_M = 0.1, math.radians(40.0), 0.6  # on the li
 LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.4, math.radians(60.0), 0.8  # ... until beyond these: a planned approach
 HOLD_WAY_MPS = 0.06  # holding in a current, turning: at least this over ground into it [m/s]
 HOLD_MAX_MPS = 0.1  # ... and never more than this [m/s]
+REPLAN_OFF_LINE_RAD = math.radians(20.0)  # a path whose end is this far off the current's line is planned again
 END_OFFSETS = (0.0,)  # planned final headings about each end of the line
 SWAP_RAD = math.radians(30.0)  # hysteresis of the bow's end of the line (past 90 deg + this, the ends swap)
 EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed (or EDGE_MIN_M) leaves the area
@@ -264,6 +265,10 @@ class LineApproach:
         if self.holding:
             self.path.reset()
             return None
+        if self.path.active and self.in_current and self.path.final_heading is not None:
+            off = abs(wrap_pi(self.path.final_heading - self.axis_rad))
+            if min(off, math.pi - off) > REPLAN_OFF_LINE_RAD:  # planned before the current was known: not its line
+                self.path.reset()
         m = self.path.command(t, p, heading_rad) if self.path.active else None
         if m is None:
             ends = None
