@@ -9,7 +9,9 @@ shortest one between two poses (law/reeds_shepp.py). Here:
 * the path ends at the goal with ``FINAL_M`` straight (ahead or astern), the bow along the holding line
   (either end of a current's line, or in still water any of ``CALM_HEADINGS``: a boat in still water holds in
   any heading) and stays within the area the boat may use (the model's domain and the geofence,
-  ``AREA_SLACK_M`` of slack); the cheapest is kept, length plus ``CUSP_COST_M`` per reversal;
+  ``AREA_SLACK_M`` of slack) and ``KEEP_OFF_M`` from the goal until the final leg (the boat passing the goal
+  on its way would be an arrival it cannot hold); the cheapest is kept, length plus ``CUSP_COST_M`` per
+  reversal;
 * it is planned on a circle a little wider than the boat's measured one (``RADIUS_MARGIN``; the boat's circle
   widens as it slows), and tracked per run (the part between two reversals) by line-of-sight guidance: the
   path's course ``LOOK_M`` ahead, less atan(offset / ``LOS_DELTA_M``) (astern the bow points opposite the
@@ -32,6 +34,7 @@ from koopguide.guidance.law import reeds_shepp
 from koopguide.guidance.law.maneuver import Maneuver, wrap_pi
 
 STEP_M = 0.05  # path sample spacing [m]
+KEEP_OFF_M = 0.25  # a path keeps this far from the goal until its final leg (a pass is an arrival) [m]
 FINAL_M = 0.4  # every path ends with this much straight along the final heading (the boat settles its heading) [m]
 CUSP_COST_M = 0.5  # a reversal costs as much as this much more path [m]
 AREA_SLACK_M = 0.1  # a path may leave the area by this much (or by what the boat is already outside) [m]
@@ -96,6 +99,8 @@ class ApproachPath:
                     candidates.append((whole.length_m + CUSP_COST_M * whole.cusps, k, whole, final))
         for _, _, path, final in sorted(candidates, key=lambda c: c[:2]):  # the cheapest that stays in the area
             samples = path.sample(STEP_M)
+            if not _keeps_off(samples, goal):
+                continue
             if outside is None or float(np.max(outside(np.array([s[:2] for s in samples])))) <= allowed:
                 self.samples, self.t_planned, self.final_heading = samples, t, final
                 return True
@@ -141,3 +146,13 @@ class ApproachPath:
         heading = course if direction > 0 else wrap_pi(course + math.pi)
         speed = min(self.cruise, max(MIN_SPEED_MPS, STOP_GAIN * remaining))
         return Maneuver(heading, direction * speed, direction < 0)
+
+
+def _keeps_off(samples: list[tuple[float, float, float, float]], goal: tuple[float, float]) -> bool:
+    """Whether the path keeps ``KEEP_OFF_M`` from the goal but for its final leg (and its first ``KEEP_OFF_M``,
+    to leave from near the goal): passing the goal on the way is an arrival the boat could not hold."""
+    final = round((FINAL_M + KEEP_OFF_M) / STEP_M)
+    start = round(KEEP_OFF_M / STEP_M)
+    return all(
+        math.hypot(n - goal[0], e - goal[1]) >= KEEP_OFF_M for n, e, _, _ in samples[start : len(samples) - final]
+    )
