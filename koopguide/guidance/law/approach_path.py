@@ -34,6 +34,9 @@ from koopguide.guidance.law import reeds_shepp
 from koopguide.guidance.law.maneuver import Maneuver, wrap_pi
 
 STEP_M = 0.05  # path sample spacing [m]
+CHECK_STEP_M = 0.1  # ... when checking a candidate against the area and the goal [m]
+MAX_CHECKED = 40  # candidates checked at most, cheapest first
+RETRY_S = 2.0  # after a plan that found nothing, plan again only this much later [s]
 KEEP_OFF_M = 0.25  # a path keeps this far from the goal until its final leg (a pass is an arrival) [m]
 FINAL_M = 0.4  # every path ends with this much straight along the final heading (the boat settles its heading) [m]
 CUSP_COST_M = 0.5  # a reversal costs as much as this much more path [m]
@@ -61,6 +64,7 @@ class ApproachPath:
         self.i = 0  # progress along the samples
         self.t_planned: float | None = None
         self.final_heading: float | None = None  # the bow's direction at the path's end [rad]
+        self.t_failed: float | None = None  # vehicle time of the last plan that found nothing [s]
 
     def reset(self) -> None:
         self.samples, self.i, self.t_planned, self.final_heading = [], 0, None, None
@@ -97,14 +101,22 @@ class ApproachPath:
                 for path in reeds_shepp.plan(start, pre, r):
                     whole = reeds_shepp.Path(start, r, (*path.segments, ("S", way * FINAL_M / r)))
                     candidates.append((whole.length_m + CUSP_COST_M * whole.cusps, k, whole, final))
-        for _, _, path, final in sorted(candidates, key=lambda c: c[:2]):  # the cheapest that stays in the area
-            samples = path.sample(STEP_M)
-            if not _keeps_off(samples, goal):
+        self.t_failed = t
+        # the cheapest that keeps off the goal and in the area, checked on a coarser sampling, MAX_CHECKED at most
+        for _, _, path, final in sorted(candidates, key=lambda c: c[:2])[:MAX_CHECKED]:
+            coarse = path.sample(CHECK_STEP_M)
+            if not _keeps_off(coarse, goal, CHECK_STEP_M):
                 continue
-            if outside is None or float(np.max(outside(np.array([s[:2] for s in samples])))) <= allowed:
-                self.samples, self.t_planned, self.final_heading = samples, t, final
+            if outside is None or float(np.max(outside(np.array([s[:2] for s in coarse])))) <= allowed:
+                self.samples, self.t_planned, self.final_heading = path.sample(STEP_M), t, final
+                self.t_failed = None
                 return True
         return False
+
+    def may_plan(self, t: float) -> bool:
+        """Whether to try planning at ``t``: not within ``RETRY_S`` of a plan that found nothing (planning costs
+        milliseconds of the control loop)."""
+        return self.t_failed is None or not 0.0 <= t - self.t_failed < RETRY_S
 
     def _run_end(self, i: int) -> int:
         """Index of the last sample of the run that sample ``i`` belongs to (up to the next reversal)."""
@@ -148,11 +160,11 @@ class ApproachPath:
         return Maneuver(heading, direction * speed, direction < 0)
 
 
-def _keeps_off(samples: list[tuple[float, float, float, float]], goal: tuple[float, float]) -> bool:
-    """Whether the path keeps ``KEEP_OFF_M`` from the goal but for its final leg (and its first ``KEEP_OFF_M``,
-    to leave from near the goal): passing the goal on the way is an arrival the boat could not hold."""
-    final = round((FINAL_M + KEEP_OFF_M) / STEP_M)
-    start = round(KEEP_OFF_M / STEP_M)
-    return all(
-        math.hypot(n - goal[0], e - goal[1]) >= KEEP_OFF_M for n, e, _, _ in samples[start : len(samples) - final]
-    )
+def _keeps_off(samples: list[tuple[float, float, float, float]], goal: tuple[float, float], step_m: float) -> bool:
+    """Whether the path (sampled every ``step_m``) keeps ``KEEP_OFF_M`` from the goal but for its final leg (and,
+    from a start nearer than that, until it is that far out): passing the goal on the way is an arrival the boat
+    could not hold."""
+    d = [math.hypot(n - goal[0], e - goal[1]) for n, e, _, _ in samples]
+    end = len(d) - round((FINAL_M + KEEP_OFF_M) / step_m)
+    start = next((k for k, dk in enumerate(d) if dk >= KEEP_OFF_M), len(d))
+    return all(dk >= KEEP_OFF_M for dk in d[start:end])

@@ -57,7 +57,6 @@ LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.4, math.radians(60.0), 0.8  # ... un
 HOLD_WAY_MPS = 0.06  # holding in a current, turning: at least this over ground into it [m/s]
 HOLD_MAX_MPS = 0.1  # ... and never more than this [m/s]
 REPLAN_OFF_LINE_RAD = math.radians(20.0)  # a path whose end is this far off the current's line is planned again
-END_OFFSETS = (0.0,)  # planned final headings about each end of the line
 SWAP_RAD = math.radians(30.0)  # hysteresis of the bow's end of the line (past 90 deg + this, the ends swap)
 EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed (or EDGE_MIN_M) leaves the area
 EDGE_MIN_M = 0.15  # [m]
@@ -270,12 +269,8 @@ class LineApproach:
             if min(off, math.pi - off) > REPLAN_OFF_LINE_RAD:  # planned before the current was known: not its line
                 self.path.reset()
         m = self.path.command(t, p, heading_rad) if self.path.active else None
-        if m is None:
-            ends = None
-            if self.in_current:  # either end of the current's line, or a little off it (the hold steers out the rest)
-                ends = tuple(
-                    wrap_pi(end + off) for end in (self.axis_rad, self.axis_rad + math.pi) for off in END_OFFSETS
-                )
+        if m is None and self.path.may_plan(t):
+            ends = (self.axis_rad, wrap_pi(self.axis_rad + math.pi)) if self.in_current else None  # either end
             if not self.path.plan(t, p, heading_rad, np.asarray(goal_ned, dtype=float), ends, radius_m, outside):
                 return None
             final = self.path.final_heading  # the bow's end of the line: the path's
