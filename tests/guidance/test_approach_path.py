@@ -1,0 +1,137 @@
+"""The rudder boat's planned approach (law/reeds_shepp.py, law/approach_path.py), the turn probe (helm.py) and
+the drifting boat's current measurement (estimation/current.py), without sockets. Conventions: local NED [m],
+headings [rad] from north, vehicle seconds."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from koopguide.guidance import settings as guidance_settings
+from koopguide.guidance.estimation.current import CurrentEstimator
+from koopguide.guidance.law import reeds_shepp
+from koopguide.guidance.law.approach_path import FINAL_M, KEEP_OFF_M, ApproachPath
+from koopguide.guidance.law.command import GuidanceLaw
+from koopguide.guidance.law.maneuver import wrap_pi
+from koopguide.model.field import load_field
+
+coords = st.floats(-3.0, 3.0)
+angles = st.floats(-math.pi, math.pi)
+
+
+@settings(max_examples=300, deadline=None)
+@given(n0=coords, e0=coords, h0=angles, n1=coords, e1=coords, h1=angles, r=st.floats(0.5, 2.5))
+def test_every_reeds_shepp_path_drives_from_the_start_to_the_goal_pose(n0, e0, h0, n1, e1, h1, r) -> None:
+    paths = reeds_shepp.plan((n0, e0, h0), (n1, e1, h1), r)
+    assert paths  # a Reeds-Shepp path exists between any two poses
+    straight = math.hypot(n1 - n0, e1 - e0)
+    for path in paths[:5]:
+        pts = path.sample(0.05)
+        n, e, h, _ = pts[-1]
+        assert math.hypot(n - n1, e - e1) < 1e-6 and abs(wrap_pi(h - h1)) < 1e-6
+        assert path.length_m >= straight - 1e-9  # no path is shorter than the straight line
+        assert all(math.hypot(a[0] - b[0], a[1] - b[1]) <= 0.05 + 1e-9 for a, b in itertools.pairwise(pts))
+        assert path.cusps <= 2  # Reeds & Shepp: at most two reversals
+    assert [p.length_m for p in paths] == sorted(p.length_m for p in paths)
+
+
+def test_a_turn_on_the_spot_is_a_path_with_reversals_and_no_longer_than_a_loop() -> None:
+    """Facing east at the goal, to face north there: within a 3 m tank only ahead-and-astern manoeuvres fit."""
+    paths = reeds_shepp.plan((0.0, 0.0, math.pi / 2), (0.0, 0.0, 0.0), 1.5)
+    best = paths[0]
+    assert best.cusps >= 1
+    assert best.length_m < 2.0 * math.pi * 1.5 * 0.25 + 2.0  # far less than driving a loop round
+
+
+@pytest.fixture(scope="module")
+def law(zshape_model: Path) -> GuidanceLaw:
+    cfg = guidance_settings.load(overrides={"frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0}})
+    return GuidanceLaw.from_config(load_field(zshape_model), cfg)
+
+
+def test_the_area_is_the_domain_in_ned(law: GuidanceLaw) -> None:
+    inside, east, far_east = law.outside_area(np.array([[0.5, -0.5], [0.0, 0.3], [0.0, 1.175]]))
+    assert inside == 0.0
+    assert east == pytest.approx(0.3 - 0.175, abs=0.01)  # the domain ends 0.175 m east of this goal
+    assert far_east == pytest.approx(1.0, abs=0.01)
+    assert law.outside_area(np.array([0.0, 0.3])) == pytest.approx(east)  # one point: a float
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.floats(-0.2, 2.0), e=st.floats(-1.8, 0.1), h=angles, toward=st.sampled_from([0.0, 90.0, 180.0, 270.0]))
+def test_a_planned_approach_ends_on_the_current_line_in_the_area_and_keeps_off_the_goal_till_its_final_leg(
+    law: GuidanceLaw, n: float, e: float, h: float, toward: float
+) -> None:
+    path = ApproachPath(cruise_mps=0.15, max_speed_mps=0.3)
+    upstream = math.radians(toward) + math.pi
+    start = np.array([n, e])
+    if not path.plan(
+        0.0, start, h, np.zeros(2), (wrap_pi(upstream), wrap_pi(upstream + math.pi)), 1.5, law.outside_area
+    ):
+        assert not path.active and not path.may_plan(1.0) and path.may_plan(2.5)  # retried only 2 s later
+        return
+    pts = np.array(path.samples)
+    end = pts[-1]
+    assert math.hypot(end[0], end[1]) < 1e-6
+    off = abs(wrap_pi(end[2] - upstream))
+    assert min(off, math.pi - off) < 1e-6  # bow up- or downstream
+    tail = pts[-round(FINAL_M / 0.05) :]
+    assert np.allclose(wrap_pi(tail[0, 2] - end[2]), 0.0, atol=1e-9)  # the final leg is straight
+    slack = 0.1 + 0.02 + law.outside_area(start)  # AREA_SLACK_M, and the coarser check between samples
+    assert float(np.max(law.outside_area(pts[:, :2]))) <= slack
+    d = np.hypot(pts[:, 0], pts[:, 1])
+    first_out = int(np.argmax(d >= KEEP_OFF_M)) if np.any(d >= KEEP_OFF_M) else len(d)
+    body = d[first_out : max(0, len(d) - round((FINAL_M + KEEP_OFF_M) / 0.05))]
+    assert np.all(body >= KEEP_OFF_M - 0.02)
+
+
+def test_tracking_a_path_goes_ahead_and_astern_run_by_run_and_slows_to_each_runs_end() -> None:
+    path = ApproachPath(cruise_mps=0.15, max_speed_mps=0.3)
+    assert path.plan(0.0, np.array([0.0, 0.0]), math.pi / 2, np.array([0.0, 0.0]), (0.0, math.pi), 1.5, None)
+    directions = {d for *_, d in path.samples}
+    assert directions == {1.0, -1.0}  # a manoeuvre with a reversal
+    first = path.command(0.0, np.array(path.samples[0][:2]), path.samples[0][2])
+    assert first is not None and abs(first.speed_mps) <= 0.15 + 1e-9
+    assert (first.speed_mps > 0) == (path.samples[0][3] > 0)
+    last = path.samples[-2]
+    near_end = path.command(1.0, np.array(last[:2]), last[2])
+    assert near_end is None or abs(near_end.speed_mps) < 0.1  # slowing down to stop at the goal
+    assert path.command(2.0, np.array([5.0, 5.0]), 0.0) is None  # far off the path: plan again
+
+
+def test_a_disarmed_boat_drifting_measures_the_whole_current_at_once() -> None:
+    est = CurrentEstimator(guidance_settings.load().estimator)
+    rng = np.random.default_rng(3)
+    for k in range(30):  # 1.5 s of fixes of a boat drifting at the current, heading north
+        est.update(0.05 * k, np.array([0.0, 0.03]) + rng.normal(0.0, 0.005, 2), 0.0, 0.0, drifting=True)
+    assert est.current_ned == pytest.approx([0.0, 0.03], abs=0.006)  # the along-heading component too
+    across_only = CurrentEstimator(guidance_settings.load().estimator)
+    for k in range(30):  # propelled: only the component across the heading (east) is seen
+        across_only.update(0.05 * k, np.array([0.2, 0.03]), 0.0, 0.0)
+    assert across_only.current_ned[0] == pytest.approx(0.0, abs=1e-6) and across_only.std_mps > 0.04
+
+
+def test_the_turn_probe_tells_a_boat_that_turns_in_place_from_one_that_needs_way(law: GuidanceLaw) -> None:
+    from koopguide.guidance.helm import PROBE_RAD, Helm
+
+    cfg = guidance_settings.load()
+    skid = Helm(cfg, law)
+    skid.observe(0.0, 0.0, 0.0, np.zeros(2), None)
+    v, yaw = skid.probe(0.0, 0.0)
+    assert np.allclose(v, 0.0) and yaw == pytest.approx(PROBE_RAD)  # speed 0 at a heading 60 deg off: turn in place
+    assert skid.probe(0.5, PROBE_RAD) is None and skid.ability.pivot_seen  # it turned as asked
+    rudder = Helm(cfg, law)
+    for k in range(60):  # asked to turn, it does not (no way through the water)
+        t = 0.05 * k
+        rudder.observe(t, 0.0, 0.0, np.zeros(2), None)
+        command = rudder.probe(t, 0.0)
+    assert rudder.ability.needs_way and command is not None
+    v, yaw = command
+    assert yaw is None and math.hypot(*v) == pytest.approx(cfg.command.turn_speed_mps)  # now a hard turn under way
+    assert rudder.probe(0.05 * 60 + cfg.command.probe_turn_s + 0.1, 0.0) is None  # no longer than probe_turn_s
