@@ -1,10 +1,17 @@
 """Bringing a boat that cannot turn without way onto a point, and keeping it there (pure math).
 
 A rudder boat turns only while it moves, on a circle of radius R (estimation/turning.py): at the arrival
-radius's scale (0.15 m) against R ~ 1.3 m it can neither turn on the spot to face the goal nor make a U-turn
-in the room a tank leaves. What it can do is what a driver does to turn a car in a narrow street: go ahead
-and astern in turn, each leg turning the heading the same way (the autopilot reverses the rudder astern,
-docs/rover.md), a K-turn. The approach is built on that:
+radius's scale (0.15 m) against R ~ 1.5 m it can neither turn on the spot to face the goal nor make a U-turn
+in the room a tank leaves. What it can do is what a driver does in a narrow street: go ahead and astern in
+turn (the autopilot reverses the rudder astern, docs/rover.md). Three modes, one line:
+
+* far from the line or facing off it, once the boat's turning circle is known: a planned approach, the
+  shortest Reeds-Shepp path onto an end of the line (law/approach_path.py), planned again when the boat
+  leaves it;
+* on the line near the goal (``HOLD_*``, left beyond ``LEAVE_*``): feedback; in a current into the current
+  only (:meth:`LineApproach._hold_in_current`), in still water ahead or astern along the line;
+* otherwise (no circle measured yet, or no path fits): line-of-sight guidance onto the line with K-turns,
+  reversing before the area's edge, as below.
 
 * the line it holds: through the goal along the current (in a current the boat holds only bow or stern
   upstream: across it the current sets the boat sideways faster than the rudder, with the little way a
