@@ -23,7 +23,7 @@ from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, wrap_pi
 from koopguide.guidance.settings import GuidanceConfig
 
 PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.probe_turn_s)
-PROBE_REACHED_RAD = math.radians(10.0)  # the probe's heading reached this close: the boat turned in place
+PROBE_MOVED_RAD = math.radians(10.0)  # the heading moved this much in the probe: the boat turns in place
 PROBE_WAY_RAD = math.radians(90.0)  # ... and the turn under way asked of a boat that needs way, for its circle
 LINE_CURRENT_SIGMAS = 2.0  # a current estimate this many of its standard deviations strong sets the holding line
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
@@ -46,6 +46,7 @@ class Helm:
         self.current_std = 0.0  # the current estimate's spread [m/s]
         self.probe_until: float | None = None  # vehicle time the turn probe ends [s]
         self.probe_heading: float | None = None  # the heading it asks [rad]
+        self.probe_from: float | None = None  # the heading when it began [rad]
         self.probe_with_way = False  # the probe's second stage (a boat that needs way: a hard turn under way)
         self.doing = "following the field"  # what the last command did (for the status's reason)
         self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
@@ -64,27 +65,33 @@ class Helm:
 
     def probe(self, t: float, heading_rad: float | None) -> Command | None:
         """At the start of guiding, for up to ``command.probe_turn_s``: speed 0 at a heading ``PROBE_RAD`` off the
-        boat's (velocity + yaw; Rover turns a skid-steer boat on the spot, a rudder boat not at all), until the
-        boat has shown how it turns (estimation/turning.py); a boat that needs way is then asked the same turn at
-        ``command.turn_speed_mps``, for as long again at most, until its turning circle is measured. None once
-        done (or off, or no heading known)."""
+        boat's (velocity + yaw; Rover turns a skid-steer boat on the spot, a rudder boat not at all). A boat
+        whose heading moves ``PROBE_MOVED_RAD`` turns in place; one whose heading does not move needs way, and is
+        then asked a hard turn under way (``PROBE_WAY_RAD`` off, at ``command.turn_speed_mps``), for as long
+        again at most, until its turning circle is measured. None once done (or off, or no heading known)."""
         a = self.ability
-        if heading_rad is None or a.pivot_seen or (a.needs_way and a.radius_m is not None):
+        if heading_rad is None or a.pivot_seen or (self.probe_with_way and a.radius_m is not None):
             return None
-        if self.probe_until is None or (a.needs_way and not self.probe_with_way):  # (re)start a stage
-            self.probe_with_way = a.needs_way
+        if self.probe_until is None:
+            self.probe_until, self.probe_from = t + self.cfg.command.probe_turn_s, heading_rad
+            self.probe_heading = wrap_pi(heading_rad + PROBE_RAD)
+        if not self.probe_with_way:
+            if abs(wrap_pi(heading_rad - self.probe_from)) >= PROBE_MOVED_RAD:
+                a.pivot_seen, a.needs_way = True, False  # it turned without way: it turns in place
+                return None
+            if t < self.probe_until:
+                self.asked_heading = self.probe_heading
+                return np.zeros(2), self.probe_heading
+            if self.cfg.command.probe_turn_s <= 0.0:
+                return None
+            a.needs_way, self.probe_with_way = True, True  # it did not turn: it needs way
             self.probe_until = t + self.cfg.command.probe_turn_s
-            self.probe_heading = wrap_pi(heading_rad + (PROBE_WAY_RAD if a.needs_way else PROBE_RAD))
-        if not self.probe_with_way and abs(wrap_pi(heading_rad - self.probe_heading)) <= PROBE_REACHED_RAD:
-            a.pivot_seen = True  # it turned as asked without way: it turns in place
-        if t >= self.probe_until or a.pivot_seen:
+            self.probe_heading = wrap_pi(heading_rad + PROBE_WAY_RAD)
+        if t >= self.probe_until:
             return None
-        self.asked_heading = self.probe_heading
-        if self.probe_with_way:  # ahead, velocity only: Rover steers to its direction at its speed
-            return self.cfg.command.turn_speed_mps * np.array(
-                [math.cos(self.probe_heading), math.sin(self.probe_heading)]
-            ), None
-        return np.zeros(2), self.probe_heading
+        self.asked_heading = self.probe_heading  # ahead, velocity only: Rover steers to its direction at its speed
+        v = self.cfg.command.turn_speed_mps * np.array([math.cos(self.probe_heading), math.sin(self.probe_heading)])
+        return v, None
 
     def lookahead_m(self) -> float | None:
         """The pursuit look-ahead for this boat: for a boat that needs way, at least twice its turning radius

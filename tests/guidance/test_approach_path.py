@@ -125,13 +125,13 @@ def test_the_turn_probe_tells_a_boat_that_turns_in_place_from_one_that_needs_way
     skid.observe(0.0, 0.0, 0.0, np.zeros(2), None)
     v, yaw = skid.probe(0.0, 0.0)
     assert np.allclose(v, 0.0) and yaw == pytest.approx(PROBE_RAD)  # speed 0 at a heading 60 deg off: turn in place
-    assert skid.probe(0.5, PROBE_RAD) is None and skid.ability.pivot_seen  # it turned as asked
+    assert skid.probe(0.5, math.radians(15.0)) is None and skid.ability.pivot_seen  # its heading moved: it turns
     rudder = Helm(cfg, law)
-    for k in range(60):  # asked to turn, it does not (no way through the water)
+    for k in range(round((cfg.command.probe_turn_s + 0.5) / 0.05)):  # asked to turn, it does not (no way on)
         t = 0.05 * k
         rudder.observe(t, 0.0, 0.0, np.zeros(2), None)
         command = rudder.probe(t, 0.0)
     assert rudder.ability.needs_way and command is not None
     v, yaw = command
     assert yaw is None and math.hypot(*v) == pytest.approx(cfg.command.turn_speed_mps)  # now a hard turn under way
-    assert rudder.probe(0.05 * 60 + cfg.command.probe_turn_s + 0.1, 0.0) is None  # no longer than probe_turn_s
+    assert rudder.probe(2.0 * cfg.command.probe_turn_s + 0.2, 0.0) is None  # each stage no longer than probe_turn_s
