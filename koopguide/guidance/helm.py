@@ -25,6 +25,10 @@ from koopguide.guidance.settings import GuidanceConfig
 PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.probe_turn_s)
 PROBE_MOVED_RAD = math.radians(10.0)  # the heading moved this much in the probe: the boat turns in place
 PROBE_WAY_RAD = math.radians(90.0)  # ... and the turn under way asked of a boat that needs way, for its circle
+PROBE_DOING = {
+    False: "asking a turn in place to tell how the boat turns",
+    True: "asking a hard turn under way to measure its turning circle",
+}
 LINE_CURRENT_SIGMAS = 2.0  # a current estimate this many of its standard deviations strong sets the holding line
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
 Command = tuple[np.ndarray, float | None]  # (velocity NED [m/s], yaw [rad] or None for velocity only)
@@ -199,7 +203,7 @@ class Helm:
         if sp.state is not GuidanceState.GUIDING or sp.ground_ned is None:
             return np.asarray(sp.velocity_ned, dtype=float), None
         probe = self.probe(self.t, heading_rad) if self.t is not None else None
-        self.doing = "asking a turn in place to tell how the boat turns" if probe else "following the field"
+        self.doing = "following the field" if probe is None else PROBE_DOING[self.probe_with_way]
         if probe is not None:
             return probe
         if distance_m <= self.cfg.arrival.capture_radius_m:
