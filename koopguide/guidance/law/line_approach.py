@@ -137,28 +137,22 @@ class LineApproach:
         if self.axis_rad is None:
             raise ValueError("LineApproach.command before aim()")
         p = np.asarray(p_ned, dtype=float)
-        a = unit(self.axis_rad)
-        n = np.array([-a[1], a[0]])
         e = p - np.asarray(goal_ned, dtype=float)
-        along, cross = float(e @ a), float(e @ n)  # [m] ahead of the goal along the axis, to its right
+        _, _, along, cross = self._line_frame(e)
         planned = None if t is None else self._planned(t, p, goal_ned, heading_rad, radius_m, along, cross, outside)
         if planned is not None:
             return self._finish(planned, heading_rad, current_ned, water_mps)
-        a = unit(self.axis_rad)
-        n = np.array([-a[1], a[0]])
-        along, cross = float(e @ a), float(e @ n)
+        a, n, along, cross = self._line_frame(e)  # the plan may have chosen the other end of the line
         delta = min(MAX_DELTA_M, max(MIN_DELTA_M, radius_m if radius_m is not None else DEFAULT_RADIUS_M))
         h = unit(heading_rad)
         # which way along the line to the goal (the bow lies along +a, so +1 is ahead): past the goal by the leash
         # (FLIP_M once on the line), the other way
         on_line = abs(cross) <= self.settle_m
 
-        def course(travel: float) -> np.ndarray:  # the LOS course for ``travel`` (unit, NED)
-            aim = delta * travel * a - cross * n
-            return aim / float(np.hypot(*aim))
-
-        def inward(travel: float) -> bool:  # that course does not lead out of the area
-            return outside is None or outside(p + EDGE_COURSE_M * course(travel)) <= outside(p)
+        def inward(travel: float) -> bool:  # its LOS course does not lead out of the area
+            return outside is None or outside(p + EDGE_COURSE_M * self._course(travel, delta, a, n, cross)) <= outside(
+                p
+            )
 
         def effort(travel: float) -> tuple[bool, float]:  # out of the area first, then the larger turn
             return (not inward(travel), abs(wrap_pi(self._heading(travel, delta, a, n, cross) - heading_rad)))
@@ -302,10 +296,23 @@ class LineApproach:
             heading = heading_rad
         return Maneuver(heading, s, m.astern)
 
+    def _line_frame(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """The line's unit axis ``a`` (the bow's end), its right normal ``n``, and the offset ``e`` = boat - goal
+        [m] along and across it (ahead of the goal along the axis, to its right)."""
+        a = unit(self.axis_rad)
+        n = np.array([-a[1], a[0]])
+        return a, n, float(e @ a), float(e @ n)
+
+    @staticmethod
+    def _course(sign: float, delta: float, a: np.ndarray, n: np.ndarray, cross: float) -> np.ndarray:
+        """The LOS course for travel ``sign`` (+1 along the axis, -1 against it), a unit NED vector: toward the
+        point ``delta`` along the line."""
+        aim = delta * sign * a - cross * n
+        return aim / float(np.hypot(*aim))
+
     @staticmethod
     def _heading(sign: float, delta: float, a: np.ndarray, n: np.ndarray, cross: float) -> float:
-        """The LOS heading for travel ``sign`` (+1 ahead along the axis, -1 astern): the bow toward the point
-        ``delta`` along the line, or away from it astern."""
-        aim = delta * sign * a - cross * n
-        course = math.atan2(aim[1], aim[0])
+        """The LOS heading for travel ``sign``: the bow along the course ahead, or opposite it astern."""
+        c = LineApproach._course(sign, delta, a, n, cross)
+        course = math.atan2(c[1], c[0])
         return course if sign > 0 else wrap_pi(course + math.pi)
