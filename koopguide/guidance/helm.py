@@ -30,6 +30,7 @@ PROBE_DOING = {
     True: "asking a hard turn under way to measure its turning circle",
 }
 LINE_CURRENT_SIGMAS = 2.0  # a current estimate this many of its standard deviations strong sets the holding line
+LINE_DOING = "making for the line it can hold the goal on"  # near the goal, a boat that needs way, off its line
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
 Command = tuple[np.ndarray, float | None]  # (velocity NED [m/s], yaw [rad] or None for velocity only)
 
@@ -129,6 +130,12 @@ class Helm:
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
         self.ability.update(t, asked, u, turn_rate_radps)
 
+    def on_station(self, heading_rad: float | None) -> bool:
+        """Whether the boat can stay where it is: a boat that needs way only once it holds its line (on it, facing
+        along it: law/line_approach.py); crossing the arrival radius at way, off the line, is not arriving.
+        Without a heading (or in company) the helm sends velocities only, and the distance alone decides."""
+        return heading_rad is None or not self.ability.needs_way or self.in_company or self.line.holding
+
     def line_radius_m(self) -> float:
         """Within this distance of the goal a boat that needs way makes for the line it will hold (twice its
         turning radius: it has room to turn onto the line), and at least within the capture radius."""
@@ -200,6 +207,10 @@ class Helm:
         """The law's decision ``sp`` (guiding, hold, fault) as a setpoint: within the capture radius as near a
         point, beyond it as following the field (after the turn probe, :meth:`probe`); a zero or non-guiding
         decision goes as it is."""
+        if sp.state is GuidanceState.ARRIVED and not self.on_station(heading_rad):
+            # within the arrival radius, not yet holding its line (the supervisor has not arrived): still on the way
+            self.doing = LINE_DOING
+            return self.near(p_ned, sp.velocity_ned, heading_rad, current_ned, distance_m)
         if sp.state is not GuidanceState.GUIDING or sp.ground_ned is None:
             return np.asarray(sp.velocity_ned, dtype=float), None
         probe = self.probe(self.t, heading_rad) if self.t is not None else None
@@ -207,7 +218,9 @@ class Helm:
         if probe is not None:
             return probe
         if distance_m <= self.cfg.arrival.capture_radius_m:
-            return self.near(p_ned, sp.ground_ned, heading_rad, current_ned, distance_m)
+            cmd = self.near(p_ned, sp.ground_ned, heading_rad, current_ned, distance_m)
+            self.doing = self.doing if self.on_station(heading_rad) else LINE_DOING
+            return cmd
         return self.follow(p_ned, sp, heading_rad, current_ned, distance_m)
 
     def yaw_for(self, velocity: tuple[float, float], yaw: float | None, heading_rad: float | None) -> float | None:

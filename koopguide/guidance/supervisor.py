@@ -33,10 +33,10 @@ from koopguide.guidance.vehicle_state import VehicleState
 from koopguide.mavlink import rover
 
 HONEST_LEAD_S = 0.25  # leave arrived on where the boat will be this much later [s] (the fix's age, and more)
+HONEST_SIGMAS = 2.0  # ... and when it may be beyond the reacquire radius by this many of the estimate's spreads
 OUTPUT_GAP_PERIODS = 2.0  # no setpoint for this many command periods while guiding/arrived: fault
 ZERO = (0.0, 0.0)
 S = GuidanceState
-
 
 Velocity = tuple[float, float]  # (vN, vE) [m/s]
 Requests = list[ev.Request] | tuple[ev.Request, ...]
@@ -254,7 +254,7 @@ class Supervisor:
         distance = law.distance_to_goal(p)
         if self.arrived:
             self.reacquire_if_drifted(distance, now)
-        elif distance <= arrival.radius_m:
+        elif distance <= arrival.radius_m and self.helm.on_station(heading):
             self.arrived, self.degraded, self.back_reason = True, False, ""
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
             self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s")
@@ -292,7 +292,7 @@ class Supervisor:
                 return self._start_pursuit(now, wall, distance, requests)
             v, yaw = self.helm.command(p, sp, heading, current, distance)
             state, reason = (
-                sp.state,
+                S.GUIDING if sp.state is S.ARRIVED else sp.state,  # within the radius, not on station: on the way
                 sp.reason or f"{self.back_reason}{self.helm.doing}, {distance:.2f} m from the goal",
             )
         return self._out(tuple(v), state, reason, True, now, requests, yaw)
@@ -317,9 +317,9 @@ class Supervisor:
         return True
 
     def reacquire_if_drifted(self, distance: float, now: float) -> None:
-        """Leave arrived for guiding if ``distance`` [m] from the goal is beyond reacquire_radius_m."""
+        """Leave arrived for guiding if ``distance`` [m] plus the estimate's spread may exceed reacquire_radius_m."""
         limit = self.cfg.arrival.reacquire_radius_m
-        if not self.arrived or distance <= limit:
+        if not self.arrived or distance + HONEST_SIGMAS * self.vehicle.tracker.position_std_m() <= limit:
             return
         reason = f"drifted {distance:.2f} m from the goal, beyond reacquire_radius_m {limit:g}: guiding back"
         self.back_reason = reason.replace(": guiding back", "; ")

@@ -116,6 +116,10 @@ class KalmanTracker:
             P[i : i + 2, i : i + 2] = [[axis.p00, axis.p01], [axis.p01, axis.p11]]
         return P
 
+    def position_std_m(self) -> float:
+        """The position estimate's spread: the larger axis's standard deviation [m] (0 before the first fix)."""
+        return math.sqrt(max(self.north.p00, self.east.p00, 0.0)) if self.t is not None else 0.0
+
     def reset(self, t: float, fix: np.ndarray | tuple[float, ...]) -> None:
         """Restart at ``fix`` = (N, E, vN, vE) at vehicle time ``t``."""
         n, e, vn, ve = (float(value) for value in fix)

@@ -231,12 +231,15 @@ class LineApproach:
         self.astern = self.travel < 0
         heading = self._heading(self.travel, delta, a, n, cross)
         to_go = float((np.asarray(goal_ned, dtype=float) - p) @ up)  # how far the goal lies upstream [m]
-        if to_go < -FLIP_M:  # upstream of the goal: speed 0, the current carries the boat back
+        turning = abs(wrap_pi(heading - heading_rad)) > TURNING_RAD
+        if to_go < (-LEASH_M if turning else -FLIP_M):
+            # upstream of the goal: speed 0, the current carries the boat back (not while the bow is off the line
+            # and the goal is still near: drifting, no water passes the rudder, and the bow would stay off)
             return Maneuver(heading, 0.0, self.astern)
         s = self.gain * math.hypot(max(to_go, 0.0), cross)
         if bias_ned is not None:
             s += self.travel * float(np.asarray(bias_ned, dtype=float) @ unit(heading))
-        if abs(wrap_pi(heading - heading_rad)) > TURNING_RAD:
+        if turning:
             s = max(s, HOLD_WAY_MPS)  # the current's flow past the rudder and a little more
         s = min(HOLD_MAX_MPS, s)
         return Maneuver(heading, self.travel * max(s, MIN_SPEED_MPS), self.astern)
@@ -255,14 +258,14 @@ class LineApproach:
         """Far from the line or facing off it: the planned approach's command (law/approach_path.py), planned
         anew when there is none; None on the line near the goal (feedback holds the boat there), or before the
         boat's turning circle has been measured."""
-        if radius_m is None:  # its turning circle not yet seen: nothing to plan with
-            return None
         facing = abs(wrap_pi(heading_rad - self.axis_rad))
-        if self.holding:
-            self.holding = abs(cross) <= LEAVE_CROSS_M and facing <= LEAVE_RAD and abs(along) <= LEAVE_ALONG_M
+        if self.holding:  # in still water the boat barely moves while it holds: off by more than it could be at
+            # the goal (twice settle_m, the arrival radius), it would stay off
+            leave_cross = LEAVE_CROSS_M if self.in_current else 2.0 * self.settle_m
+            self.holding = abs(cross) <= leave_cross and facing <= LEAVE_RAD and abs(along) <= LEAVE_ALONG_M
         else:
             self.holding = abs(cross) <= HOLD_CROSS_M and facing <= HOLD_RAD and abs(along) <= HOLD_ALONG_M
-        if self.holding:
+        if self.holding or radius_m is None:  # holding; or its turning circle not yet seen: nothing to plan with
             self.path.reset()
             return None
         if self.path.active and self.in_current and self.path.final_heading is not None:
