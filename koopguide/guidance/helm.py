@@ -238,12 +238,9 @@ class Helm:
     ) -> Command:
         c = self._current(current_ned)
         # the line follows a current only once the estimate is clear of its own spread (early on, its direction
-        # swings with every turn, and so would the line)
-        c = (
-            c
-            if c is not None and float(np.hypot(*c)) >= max(CURRENT_MIN_MPS, LINE_CURRENT_SIGMAS * self.current_std)
-            else None
-        )
+        # swings with every turn, and so would the line), and until it is within one spread of nothing
+        sigmas = 1.0 if self.line.in_current else LINE_CURRENT_SIGMAS
+        c = c if c is not None and float(np.hypot(*c)) >= max(CURRENT_MIN_MPS, sigmas * self.current_std) else None
         self.line.aim(p_ned, self.law.goal_ned, heading_rad, c)
         m = self.line.command(
             p_ned,

@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 
 from koopguide.guidance.estimation.turning import RATE_FLOOR, TurnAbility
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
-from koopguide.guidance.law.line_approach import LineApproach
-from koopguide.guidance.law.maneuver import ASTERN_RAD, MIN_SPEED_MPS, ManeuverPlanner, wrap_pi
+from koopguide.guidance.law.line_approach import CREEP_M, CREEP_MPS, LineApproach
+from koopguide.guidance.law.maneuver import ASTERN_RAD, MIN_SPEED_MPS, Maneuver, ManeuverPlanner, wrap_pi
 from koopguide.mavlink.rover import MASK_VELOCITY_YAW, velocity_setpoint
 
 angles = st.floats(-math.pi, math.pi, allow_nan=False)
@@ -205,3 +205,23 @@ def test_line_approach_reverses_before_the_area_edge_and_lets_the_current_carry_
     current, p = np.array([0.03, 0.0]), np.array([-0.04, 0.0])
     hold.aim(p, goal, math.pi, current)
     assert hold.command(p, goal, math.pi, radius_m=1.3, current_ned=current).speed_mps == 0.0
+
+
+def test_holding_in_a_current_creeps_upstream_past_the_goal_then_drifts_back_onto_it() -> None:
+    """A cycle long enough for the rudder to act: from the goal the boat creeps CREEP_M upstream (way on, at
+    least CREEP_MPS over ground), then drifts back with the throttle off (speed 0) all the way to the goal, not
+    in bursts of a few centimetres (the bow would not answer them)."""
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.075, way_mps=0.15)
+    goal, current, bow = np.zeros(2), np.array([0.03, 0.0]), math.pi  # current toward N, bow upstream (S)
+
+    def at(north: float) -> Maneuver:
+        p = np.array([north, 0.0])
+        line.aim(p, goal, bow, current)
+        return line.command(p, goal, bow, radius_m=1.3, current_ned=current, t=0.0)
+
+    cycle = [at(north) for north in (0.01, -0.05, -CREEP_M + 0.01, -CREEP_M - 0.01, -0.05, -0.01, 0.0)]
+    assert line.holding
+    assert all(abs(wrap_pi(m.heading_rad - bow)) < 1e-6 for m in cycle)  # on the line, bow upstream
+    creep, drift = cycle[:3] + cycle[-1:], cycle[3:6]
+    assert all(m.speed_mps >= CREEP_MPS and not m.astern for m in creep)  # ahead, upstream
+    assert all(m.speed_mps == 0.0 for m in drift)  # the current carries it back

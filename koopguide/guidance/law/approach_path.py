@@ -6,12 +6,14 @@ makes slow progress in a tight space: a boat that turns on a circle of radius R 
 in a 3 m tank. A car's answer is a planned manoeuvre with reversals, and Reeds & Shepp (1990) give the
 shortest one between two poses (law/reeds_shepp.py). Here:
 
-* the path ends at the goal with ``FINAL_M`` straight (ahead or astern), the bow along the holding line
-  (either end of a current's line, or in still water any of ``CALM_HEADINGS``: a boat in still water holds in
-  any heading) and stays within the area the boat may use (the model's domain and the geofence,
-  ``AREA_SLACK_M`` of slack) and ``KEEP_OFF_M`` from the goal until the final leg (the boat passing the goal
-  on its way would be an arrival it cannot hold); the cheapest is kept, length plus ``CUSP_COST_M`` per
-  reversal;
+* the path ends with ``FINAL_M`` straight (ahead or astern) on the holding line, the bow along it (either
+  end of a current's line, or in still water any of ``CALM_HEADINGS``: a boat in still water holds in any
+  heading), at the goal or ``SHORT_M`` short of it (where the hold, law/line_approach.py, takes the boat on:
+  in a current it drifts down onto the goal; this is what fits where the goal lies near the area's
+  downstream edge) and stays within the area the boat may use (the model's domain and the geofence,
+  ``AREA_SLACK_M`` of slack); the cheapest is kept, length plus ``CUSP_COST_M`` per reversal plus
+  ``SHORT_COST`` per metre short. (The path may pass near the goal: a boat that needs way arrives only once
+  it holds its line, helm.py.)
 * it is planned on a circle a little wider than the boat's measured one (``RADIUS_MARGIN``; the boat's circle
   widens as it slows), and tracked per run (the part between two reversals) by line-of-sight guidance: the
   path's course ``LOOK_M`` ahead, less atan(offset / ``LOS_DELTA_M``) (astern the bow points opposite the
@@ -37,8 +39,9 @@ STEP_M = 0.05  # path sample spacing [m]
 CHECK_STEP_M = 0.1  # ... when checking a candidate against the area and the goal [m]
 MAX_CHECKED = 40  # candidates checked at most, cheapest first
 RETRY_S = 2.0  # after a plan that found nothing, plan again only this much later [s]
-KEEP_OFF_M = 0.25  # a path keeps this far from the goal until its final leg (a pass is an arrival) [m]
 FINAL_M = 0.4  # every path ends with this much straight along the final heading (the boat settles its heading) [m]
+SHORT_M = (0.0, 0.4)  # a path ends at the goal or this far short of it on the line, where the hold takes over [m]
+SHORT_COST = 2.0  # ... each metre short costs as much as this much more path (the hold is slower) [m/m]
 CUSP_COST_M = 0.5  # a reversal costs as much as this much more path [m]
 AREA_SLACK_M = 0.1  # a path may leave the area by this much (or by what the boat is already outside) [m]
 RADIUS_MARGIN = 1.1  # plan on a circle this much wider than the boat's measured one
@@ -97,16 +100,17 @@ class ApproachPath:
         candidates = []
         for k, final in enumerate(final_headings):
             for way in (1.0, -1.0):  # the last FINAL_M ahead or astern, straight along the final heading
-                pre = (goal[0] - way * FINAL_M * math.cos(final), goal[1] - way * FINAL_M * math.sin(final), final)
-                for path in reeds_shepp.plan(start, pre, r):
-                    whole = reeds_shepp.Path(start, r, (*path.segments, ("S", way * FINAL_M / r)))
-                    candidates.append((whole.length_m + CUSP_COST_M * whole.cusps, k, whole, final))
+                for short in SHORT_M:  # ending this far short of the goal (the hold brings it the rest of the way)
+                    c, s = way * math.cos(final), way * math.sin(final)
+                    pre = (goal[0] - (short + FINAL_M) * c, goal[1] - (short + FINAL_M) * s, final)
+                    for path in reeds_shepp.plan(start, pre, r):
+                        whole = reeds_shepp.Path(start, r, (*path.segments, ("S", way * FINAL_M / r)))
+                        cost = whole.length_m + CUSP_COST_M * whole.cusps + SHORT_COST * short
+                        candidates.append((cost, k, whole, final))
         self.t_failed = t
-        # the cheapest that keeps off the goal and in the area, checked on a coarser sampling, MAX_CHECKED at most
+        # the cheapest that stays in the area, checked on a coarser sampling, MAX_CHECKED at most
         for _, _, path, final in sorted(candidates, key=lambda c: c[:2])[:MAX_CHECKED]:
             coarse = path.sample(CHECK_STEP_M)
-            if not _keeps_off(coarse, goal, CHECK_STEP_M):
-                continue
             if outside is None or float(np.max(outside(np.array([s[:2] for s in coarse])))) <= allowed:
                 self.samples, self.t_planned, self.final_heading = path.sample(STEP_M), t, final
                 self.t_failed = None
@@ -158,13 +162,3 @@ class ApproachPath:
         heading = course if direction > 0 else wrap_pi(course + math.pi)
         speed = min(self.cruise, max(MIN_SPEED_MPS, STOP_GAIN * remaining))
         return Maneuver(heading, direction * speed, direction < 0)
-
-
-def _keeps_off(samples: list[tuple[float, float, float, float]], goal: tuple[float, float], step_m: float) -> bool:
-    """Whether the path (sampled every ``step_m``) keeps ``KEEP_OFF_M`` from the goal but for its final leg (and,
-    from a start nearer than that, until it is that far out): passing the goal on the way is an arrival the boat
-    could not hold."""
-    d = [math.hypot(n - goal[0], e - goal[1]) for n, e, _, _ in samples]
-    end = len(d) - round((FINAL_M + KEEP_OFF_M) / step_m)
-    start = next((k for k, dk in enumerate(d) if dk >= KEEP_OFF_M), len(d))
-    return all(dk >= KEEP_OFF_M for dk in d[start:end])

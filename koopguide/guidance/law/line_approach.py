@@ -59,10 +59,11 @@ FLIP_M = 0.03  # on the line: ahead <-> astern once the goal is this far behind 
 LEASH_M = 0.3  # while turning (a K-turn): the boat goes on this far past the goal before it reverses [m]
 TURNING_RAD = math.radians(20.0)  # a heading error this large is a turn: keep way on
 K_TURN_RAD = math.radians(45.0)  # ... and this large a K-turn about the goal
-HOLD_CROSS_M, HOLD_RAD, HOLD_ALONG_M = 0.1, math.radians(40.0), 0.6  # on the line near the goal: feedback only
+HOLD_CROSS_M, HOLD_RAD, HOLD_ALONG_M = 0.1, math.radians(25.0), 0.6  # on the line near the goal: feedback only
 LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.4, math.radians(60.0), 0.8  # ... until beyond these: a planned approach
 HOLD_WAY_MPS = 0.06  # holding in a current, turning: at least this over ground into it [m/s]
 HOLD_MAX_MPS = 0.1  # ... and never more than this [m/s]
+CREEP_M, CREEP_MPS = 0.12, 0.03  # holding in a current: creep this far upstream of the goal, at least this fast
 REPLAN_OFF_LINE_RAD = math.radians(20.0)  # a path whose end is this far off the current's line is planned again
 SWAP_RAD = math.radians(30.0)  # hysteresis of the bow's end of the line (past 90 deg + this, the ends swap)
 EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed (or EDGE_MIN_M) leaves the area
@@ -91,11 +92,13 @@ class LineApproach:
         self.pivot: np.ndarray | None = None  # where the K-turn under way began [m]
         self.path = ApproachPath(way_mps, max_speed_mps)  # a planned approach onto the line, while far from it
         self.holding = False  # on the line near the goal: feedback only (hysteresis on HOLD_* / LEAVE_*)
+        self.righting = False  # holding in a current, the bow off the line: way on until it is back (hysteresis)
+        self.creeping = False  # ... creeping upstream past the goal (else drifting back onto it)
 
     def reset(self) -> None:
         self.axis_rad, self.astern, self.in_current, self.travel, self.pivot = None, False, False, None, None
         self.path.reset()
-        self.holding = False
+        self.holding = self.righting = self.creeping = False
 
     def aim(self, p_ned: np.ndarray, goal_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None) -> None:
         """Choose the line: along the current (the end nearest the one held, so that the line turns with the current
@@ -231,16 +234,26 @@ class LineApproach:
         self.astern = self.travel < 0
         heading = self._heading(self.travel, delta, a, n, cross)
         to_go = float((np.asarray(goal_ned, dtype=float) - p) @ up)  # how far the goal lies upstream [m]
-        turning = abs(wrap_pi(heading - heading_rad)) > TURNING_RAD
-        if to_go < (-LEASH_M if turning else -FLIP_M):
+        error = abs(wrap_pi(heading - heading_rad))
+        # the bow off the line: way on until it is back within half the turn threshold (short bursts of way, the
+        # boat drifting back between them, leave the bow where it was: the rudder's force grows with the
+        # square of the water's speed past it)
+        self.righting = error > (0.5 * TURNING_RAD if self.righting else TURNING_RAD)
+        # a cycle: from the goal (or downstream of it) creep upstream CREEP_M past it, then drift back onto it; each
+        # creep long enough for the rudder to act (bursts of way at the goal, the boat drifting back between them,
+        # steer it hardly at all)
+        if to_go >= 0.0:
+            self.creeping = True
+        elif to_go < -CREEP_M:
+            self.creeping = False
+        if not (self.creeping or self.righting) or to_go < -HOLD_ALONG_M:
             # upstream of the goal: speed 0, the current carries the boat back (not while the bow is off the line
             # and the goal is still near: drifting, no water passes the rudder, and the bow would stay off)
             return Maneuver(heading, 0.0, self.astern)
         s = self.gain * math.hypot(max(to_go, 0.0), cross)
         if bias_ned is not None:
             s += self.travel * float(np.asarray(bias_ned, dtype=float) @ unit(heading))
-        if turning:
-            s = max(s, HOLD_WAY_MPS)  # the current's flow past the rudder and a little more
+        s = max(s, HOLD_WAY_MPS if self.righting else CREEP_MPS)  # the current's flow past the rudder and more
         s = min(HOLD_MAX_MPS, s)
         return Maneuver(heading, self.travel * max(s, MIN_SPEED_MPS), self.astern)
 
