@@ -25,6 +25,7 @@ from koopguide.guidance.settings import GuidanceConfig
 PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.probe_turn_s)
 PROBE_MOVED_RAD = math.radians(10.0)  # the heading moved this much in the probe: the boat turns in place
 PROBE_WAY_RAD = math.radians(90.0)  # ... and the turn under way asked of a boat that needs way, for its circle
+PROBE_CIRCLE_M = 1.5  # ... to the side where a circle this wide stays more inside the area [m]
 PROBE_DOING = {
     False: "asking a turn in place to tell how the boat turns",
     True: "asking a hard turn under way to measure its turning circle",
@@ -68,12 +69,13 @@ class Helm:
         self.line.reset()
         self.asked_heading = None
 
-    def probe(self, t: float, heading_rad: float | None) -> Command | None:
+    def probe(self, t: float, heading_rad: float | None, p_ned: np.ndarray | None = None) -> Command | None:
         """At the start of guiding, for up to ``command.probe_turn_s``: speed 0 at a heading ``PROBE_RAD`` off the
         boat's (velocity + yaw; Rover turns a skid-steer boat on the spot, a rudder boat not at all). A boat
         whose heading moves ``PROBE_MOVED_RAD`` turns in place; one whose heading does not move needs way, and is
         then asked a hard turn under way (``PROBE_WAY_RAD`` off, at ``command.turn_speed_mps``), for as long
-        again at most, until its turning circle is measured. None once done (or off, or no heading known)."""
+        again at most, until its turning circle is measured, to the side whose circle stays more inside the area
+        (``p_ned``: the boat's position; None: to starboard). None once done (or off, or no heading known)."""
         a = self.ability
         if heading_rad is None or a.pivot_seen or (self.probe_with_way and a.radius_m is not None):
             return None
@@ -91,12 +93,24 @@ class Helm:
                 return None
             a.needs_way, self.probe_with_way = True, True  # it did not turn: it needs way
             self.probe_until = t + self.cfg.command.probe_turn_s
-            self.probe_heading = wrap_pi(heading_rad + PROBE_WAY_RAD)
+            self.probe_heading = wrap_pi(heading_rad + self._probe_side(heading_rad, p_ned) * PROBE_WAY_RAD)
         if t >= self.probe_until:
             return None
         self.asked_heading = self.probe_heading  # ahead, velocity only: Rover steers to its direction at its speed
         v = self.cfg.command.turn_speed_mps * np.array([math.cos(self.probe_heading), math.sin(self.probe_heading)])
         return v, None
+
+    def _probe_side(self, heading_rad: float, p_ned: np.ndarray | None) -> float:
+        """+1 (to starboard) or -1: the side of the probe's hard turn whose quarter circle (of ``PROBE_CIRCLE_M``,
+        the turning radius is not known yet) leaves the area by less (a tank's wall may lie just beyond it)."""
+        if p_ned is None:
+            return 1.0
+        h = np.array([math.cos(heading_rad), math.sin(heading_rad)])
+        right = np.array([-h[1], h[0]])
+        theta = np.linspace(0.0, PROBE_WAY_RAD, 10)[:, None]
+        along, aside = PROBE_CIRCLE_M * np.sin(theta) * h, PROBE_CIRCLE_M * (1.0 - np.cos(theta)) * right
+        worst = [float(np.max(self.law.outside_area(p_ned + along + side * aside))) for side in (1.0, -1.0)]
+        return -1.0 if worst[1] < worst[0] else 1.0
 
     def lookahead_m(self) -> float | None:
         """The pursuit look-ahead for this boat: for a boat that needs way, at least twice its turning radius
@@ -213,7 +227,7 @@ class Helm:
             return self.near(p_ned, sp.velocity_ned, heading_rad, current_ned, distance_m)
         if sp.state is not GuidanceState.GUIDING or sp.ground_ned is None:
             return np.asarray(sp.velocity_ned, dtype=float), None
-        probe = self.probe(self.t, heading_rad) if self.t is not None else None
+        probe = self.probe(self.t, heading_rad, p_ned) if self.t is not None else None
         self.doing = "following the field" if probe is None else PROBE_DOING[self.probe_with_way]
         if probe is not None:
             return probe

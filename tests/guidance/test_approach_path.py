@@ -139,3 +139,36 @@ def test_the_turn_probe_tells_a_boat_that_turns_in_place_from_one_that_needs_way
     v, yaw = command
     assert yaw is None and math.hypot(*v) == pytest.approx(cfg.command.turn_speed_mps)  # now a hard turn under way
     assert rudder.probe(2.0 * cfg.command.probe_turn_s + 0.2, 0.0) is None  # each stage no longer than probe_turn_s
+
+
+def test_the_probes_hard_turn_goes_to_the_side_that_stays_inside_the_area(law: GuidanceLaw) -> None:
+    """Heading south 0.1 m inside the domain's east edge (the goal's side), a turn to port would run into the
+    wall beyond it; the probe turns to starboard (west). Near the west edge it turns to port (east)."""
+    from koopguide.guidance.helm import PROBE_WAY_RAD, Helm
+
+    cfg = guidance_settings.load()
+    south = math.pi
+    for p, side in ((np.array([1.0, 0.07]), 1.0), (np.array([1.0, -1.7]), -1.0)):
+        rudder = Helm(cfg, law)
+        for k in range(round((cfg.command.probe_turn_s + 0.2) / 0.05)):  # it does not turn in place
+            rudder.observe(0.05 * k, south, 0.0, np.zeros(2), None)
+            command = rudder.probe(0.05 * k, south, p)
+        assert rudder.ability.needs_way and command is not None
+        assert rudder.probe_heading == pytest.approx(wrap_pi(south + side * PROBE_WAY_RAD))
+
+
+def test_in_a_current_the_plan_ends_bow_upstream_and_leaves_room_for_the_drift_downstream(law: GuidanceLaw) -> None:
+    """Current 0.03 m/s toward E, the goal 0.175 m inside the domain's east (downstream) edge: the path ends with
+    the bow upstream (west: the boat then holds ahead, where its rudder works best), and every point of it stays
+    inside the area even when set DRIFT_S of the current downstream."""
+    from koopguide.guidance.law.approach_path import AREA_SLACK_M, DRIFT_S
+
+    current = np.array([0.0, 0.03])
+    for start, heading in ((np.array([1.0, -0.8]), math.pi), (np.array([0.4, -0.5]), 0.0)):
+        path = ApproachPath(cruise_mps=0.15, max_speed_mps=0.3)
+        ends = (-math.pi / 2, math.pi / 2)
+        assert path.plan(0.0, start, heading, np.zeros(2), ends, 1.3, law.outside_area, current)
+        assert path.final_heading == pytest.approx(-math.pi / 2)  # bow upstream
+        pts = np.array([s[:2] for s in path.samples])
+        drifted = float(np.max(law.outside_area(pts + DRIFT_S * current)))
+        assert drifted <= AREA_SLACK_M + 0.02 + law.outside_area(start)  # and the coarser check between samples

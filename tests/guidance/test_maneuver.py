@@ -207,10 +207,10 @@ def test_line_approach_reverses_before_the_area_edge_and_lets_the_current_carry_
     assert hold.command(p, goal, math.pi, radius_m=1.3, current_ned=current).speed_mps == 0.0
 
 
-def test_holding_in_a_current_creeps_upstream_past_the_goal_then_drifts_back_onto_it() -> None:
-    """A cycle long enough for the rudder to act: from the goal the boat creeps CREEP_M upstream (way on, at
-    least CREEP_MPS over ground), then drifts back with the throttle off (speed 0) all the way to the goal, not
-    in bursts of a few centimetres (the bow would not answer them)."""
+def test_holding_in_a_current_creeps_upstream_across_the_goal_then_drifts_back_across_it() -> None:
+    """A cycle about the goal long enough for the rudder to act: the boat creeps CREEP_M upstream (way on, at
+    least CREEP_MPS over ground) from half of it downstream of the goal, then drifts back with the throttle off
+    (speed 0) as far, not in bursts of a few centimetres (the bow would not answer them)."""
     line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.075, way_mps=0.15)
     goal, current, bow = np.zeros(2), np.array([0.03, 0.0]), math.pi  # current toward N, bow upstream (S)
 
@@ -219,7 +219,8 @@ def test_holding_in_a_current_creeps_upstream_past_the_goal_then_drifts_back_ont
         line.aim(p, goal, bow, current)
         return line.command(p, goal, bow, radius_m=1.3, current_ned=current, t=0.0)
 
-    cycle = [at(north) for north in (0.01, -0.05, -CREEP_M + 0.01, -CREEP_M - 0.01, -0.05, -0.01, 0.0)]
+    half = 0.5 * CREEP_M  # the cycle runs from half of it downstream of the goal to half of it upstream
+    cycle = [at(north) for north in (half + 0.01, 0.0, -half + 0.01, -half - 0.01, 0.0, half - 0.01, half + 0.01)]
     assert line.holding
     assert all(abs(wrap_pi(m.heading_rad - bow)) < 1e-6 for m in cycle)  # on the line, bow upstream
     creep, drift = cycle[:3] + cycle[-1:], cycle[3:6]

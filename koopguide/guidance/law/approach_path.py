@@ -33,7 +33,7 @@ from collections.abc import Callable
 import numpy as np
 
 from koopguide.guidance.law import reeds_shepp
-from koopguide.guidance.law.maneuver import Maneuver, wrap_pi
+from koopguide.guidance.law.maneuver import Maneuver, unit, wrap_pi
 
 STEP_M = 0.05  # path sample spacing [m]
 CHECK_STEP_M = 0.1  # ... when checking a candidate against the area and the goal [m]
@@ -44,6 +44,8 @@ SHORT_M = (0.0, 0.4)  # a path ends at the goal or this far short of it on the l
 SHORT_COST = 2.0  # ... each metre short costs as much as this much more path (the hold is slower) [m/m]
 CUSP_COST_M = 0.5  # a reversal costs as much as this much more path [m]
 AREA_SLACK_M = 0.1  # a path may leave the area by this much (or by what the boat is already outside) [m]
+DOWNSTREAM_COST_M = 2.0  # a path that ends with the bow downstream costs as much as this much more path [m]
+DRIFT_S = 4.0  # a path stays inside the area when set this long of the current downstream too [s]
 RADIUS_MARGIN = 1.1  # plan on a circle this much wider than the boat's measured one
 MIN_RADIUS_M, MAX_RADIUS_M = 1.0, 2.5  # [m]
 CALM_HEADINGS = 8  # final headings tried in still water (every 360 / 8 deg)
@@ -85,10 +87,13 @@ class ApproachPath:
         final_headings: tuple[float, ...] | None,
         radius_m: float | None,
         outside: Callable[[np.ndarray], np.ndarray] | None,
+        current_ned: np.ndarray | None = None,
     ) -> bool:
         """Plan from the boat's pose to the goal, the bow at the end along one of ``final_headings`` (None: any,
         still water); False (and no path) when none stays in the area. ``outside``: how far each of ``(K, 2)``
-        NED points lies outside the area [m] (0 inside)."""
+        NED points lies outside the area [m] (0 inside). ``current_ned`` [m/s]: the path must stay inside when set
+        ``DRIFT_S`` of the current downstream too (a boat tracking it is carried off it downstream before its
+        guidance corrects; a wall there would pin it)."""
         self.reset()
         r = min(MAX_RADIUS_M, max(MIN_RADIUS_M, RADIUS_MARGIN * (radius_m if radius_m is not None else 1.4)))
         if final_headings is None:
@@ -99,19 +104,24 @@ class ApproachPath:
         allowed = AREA_SLACK_M + here
         candidates = []
         for k, final in enumerate(final_headings):
+            downstream = current_ned is not None and float(np.asarray(current_ned) @ unit(final)) > 0.0
+            bow_cost = DOWNSTREAM_COST_M if downstream else 0.0  # it would hold astern, its rudder at its weakest
             for way in (1.0, -1.0):  # the last FINAL_M ahead or astern, straight along the final heading
                 for short in SHORT_M:  # ending this far short of the goal (the hold brings it the rest of the way)
                     c, s = way * math.cos(final), way * math.sin(final)
                     pre = (goal[0] - (short + FINAL_M) * c, goal[1] - (short + FINAL_M) * s, final)
                     for path in reeds_shepp.plan(start, pre, r):
                         whole = reeds_shepp.Path(start, r, (*path.segments, ("S", way * FINAL_M / r)))
-                        cost = whole.length_m + CUSP_COST_M * whole.cusps + SHORT_COST * short
+                        cost = whole.length_m + CUSP_COST_M * whole.cusps + SHORT_COST * short + bow_cost
                         candidates.append((cost, k, whole, final))
         self.t_failed = t
         # the cheapest that stays in the area, checked on a coarser sampling, MAX_CHECKED at most
         for _, _, path, final in sorted(candidates, key=lambda c: c[:2])[:MAX_CHECKED]:
             coarse = path.sample(CHECK_STEP_M)
-            if outside is None or float(np.max(outside(np.array([s[:2] for s in coarse])))) <= allowed:
+            points = np.array([s[:2] for s in coarse])
+            if current_ned is not None:
+                points = np.vstack([points, points + DRIFT_S * np.asarray(current_ned, dtype=float)])
+            if outside is None or float(np.max(outside(points))) <= allowed:
                 self.samples, self.t_planned, self.final_heading = path.sample(STEP_M), t, final
                 self.t_failed = None
                 return True

@@ -49,7 +49,7 @@ from collections.abc import Callable
 import numpy as np
 
 from koopguide.guidance.law.approach_path import ApproachPath
-from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, wrap_pi
+from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, unit, wrap_pi
 
 MIN_DELTA_M = 0.3  # the smallest LOS look-ahead [m]
 MAX_DELTA_M = 1.0  # the largest: a longer one only delays the turn onto the line (K-turns make up the rest) [m]
@@ -63,17 +63,13 @@ HOLD_CROSS_M, HOLD_RAD, HOLD_ALONG_M = 0.1, math.radians(25.0), 0.6  # on the li
 LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.4, math.radians(60.0), 0.8  # ... until beyond these: a planned approach
 HOLD_WAY_MPS = 0.06  # holding in a current, turning: at least this over ground into it [m/s]
 HOLD_MAX_MPS = 0.1  # ... and never more than this [m/s]
-CREEP_M, CREEP_MPS = 0.12, 0.03  # holding in a current: creep this far upstream of the goal, at least this fast
+CREEP_M, CREEP_MPS = 0.12, 0.03  # holding in a current: creep this far upstream (about the goal), this fast at least
 REPLAN_OFF_LINE_RAD = math.radians(20.0)  # a path whose end is this far off the current's line is planned again
 SWAP_RAD = math.radians(30.0)  # hysteresis of the bow's end of the line (past 90 deg + this, the ends swap)
 EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed (or EDGE_MIN_M) leaves the area
 EDGE_MIN_M = 0.15  # [m]
 EDGE_SLANT = math.sin(math.radians(20.0))  # ... "leaves" when at least this fraction of the look goes outward
 EDGE_COURSE_M = 0.5  # a course along the line "leads out" when the point this far along it is farther out [m]
-
-
-def unit(angle_rad: float) -> np.ndarray:
-    return np.array([math.cos(angle_rad), math.sin(angle_rad)])
 
 
 class LineApproach:
@@ -142,7 +138,11 @@ class LineApproach:
         p = np.asarray(p_ned, dtype=float)
         e = p - np.asarray(goal_ned, dtype=float)
         _, _, along, cross = self._line_frame(e)
-        planned = None if t is None else self._planned(t, p, goal_ned, heading_rad, radius_m, along, cross, outside)
+        planned = (
+            None
+            if t is None
+            else self._planned(t, p, goal_ned, heading_rad, radius_m, along, cross, outside, current_ned)
+        )
         if planned is not None:
             return self._finish(planned, heading_rad, current_ned, water_mps)
         a, n, along, cross = self._line_frame(e)  # the plan may have chosen the other end of the line
@@ -239,14 +239,14 @@ class LineApproach:
         # boat drifting back between them, leave the bow where it was: the rudder's force grows with the
         # square of the water's speed past it)
         self.righting = error > (0.5 * TURNING_RAD if self.righting else TURNING_RAD)
-        # a cycle: from the goal (or downstream of it) creep upstream CREEP_M past it, then drift back onto it; each
-        # creep long enough for the rudder to act (bursts of way at the goal, the boat drifting back between them,
-        # steer it hardly at all)
-        if to_go >= 0.0:
+        # a cycle about the goal: from CREEP_M / 2 downstream of it creep upstream to CREEP_M / 2 past it, then drift
+        # back; each creep long enough for the rudder to act (bursts of way at the goal, the boat drifting back
+        # between them, steer it hardly at all)
+        if to_go >= 0.5 * CREEP_M:
             self.creeping = True
-        elif to_go < -CREEP_M:
+        elif to_go < -0.5 * CREEP_M:
             self.creeping = False
-        if not (self.creeping or self.righting) or to_go < -HOLD_ALONG_M:
+        if not (self.creeping or self.righting):
             # upstream of the goal: speed 0, the current carries the boat back (not while the bow is off the line
             # and the goal is still near: drifting, no water passes the rudder, and the bow would stay off)
             return Maneuver(heading, 0.0, self.astern)
@@ -267,6 +267,7 @@ class LineApproach:
         along: float,
         cross: float,
         outside: Callable[[np.ndarray], float] | None,
+        current_ned: np.ndarray | None = None,
     ) -> Maneuver | None:
         """Far from the line or facing off it: the planned approach's command (law/approach_path.py), planned
         anew when there is none; None on the line near the goal (feedback holds the boat there), or before the
@@ -288,7 +289,8 @@ class LineApproach:
         m = self.path.command(t, p, heading_rad) if self.path.active else None
         if m is None and self.path.may_plan(t):
             ends = (self.axis_rad, wrap_pi(self.axis_rad + math.pi)) if self.in_current else None  # either end
-            if not self.path.plan(t, p, heading_rad, np.asarray(goal_ned, dtype=float), ends, radius_m, outside):
+            goal = np.asarray(goal_ned, dtype=float)
+            if not self.path.plan(t, p, heading_rad, goal, ends, radius_m, outside, current_ned):
                 return None
             final = self.path.final_heading  # the bow's end of the line: the path's
             if self.in_current:

@@ -46,6 +46,11 @@ def wrap_pi(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def unit(angle_rad: float) -> np.ndarray:
+    """The NED unit vector of heading ``angle_rad`` [rad from north]."""
+    return np.array([math.cos(angle_rad), math.sin(angle_rad)])
+
+
 @dataclass(frozen=True)
 class Maneuver:
     """A heading-and-speed command: ``speed_mps`` over ground along ``heading_rad`` (negative: backward over
