@@ -19,7 +19,7 @@ import numpy as np
 from koopguide.guidance.estimation.turning import TurnAbility
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, CURRENT_MIN_MPS, GuidanceLaw, GuidanceState, Setpoint
 from koopguide.guidance.law.line_approach import DEFAULT_RADIUS_M, LineApproach
-from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, wrap_pi
+from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, unit, wrap_pi
 from koopguide.guidance.settings import GuidanceConfig
 
 PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.probe_turn_s)
@@ -97,7 +97,7 @@ class Helm:
         if t >= self.probe_until:
             return None
         self.asked_heading = self.probe_heading  # ahead, velocity only: Rover steers to its direction at its speed
-        v = self.cfg.command.turn_speed_mps * np.array([math.cos(self.probe_heading), math.sin(self.probe_heading)])
+        v = self.cfg.command.turn_speed_mps * unit(self.probe_heading)
         return v, None
 
     def _probe_side(self, heading_rad: float, p_ned: np.ndarray | None) -> float:
@@ -105,7 +105,7 @@ class Helm:
         the turning radius is not known yet) leaves the area by less (a tank's wall may lie just beyond it)."""
         if p_ned is None:
             return 1.0
-        h = np.array([math.cos(heading_rad), math.sin(heading_rad)])
+        h = unit(heading_rad)
         right = np.array([-h[1], h[0]])
         theta = np.linspace(0.0, PROBE_WAY_RAD, 10)[:, None]
         along, aside = PROBE_CIRCLE_M * np.sin(theta) * h, PROBE_CIRCLE_M * (1.0 - np.cos(theta)) * right

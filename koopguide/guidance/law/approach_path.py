@@ -102,14 +102,16 @@ class ApproachPath:
         goal = (float(goal_ned[0]), float(goal_ned[1]))
         here = 0.0 if outside is None else float(outside(np.asarray(p_ned, dtype=float)[None, :])[0])
         allowed = AREA_SLACK_M + here
+        current = None if current_ned is None else np.asarray(current_ned, dtype=float)
         candidates = []
         for k, final in enumerate(final_headings):
-            downstream = current_ned is not None and float(np.asarray(current_ned) @ unit(final)) > 0.0
+            bow = unit(final)
+            downstream = current is not None and float(current @ bow) > 0.0
             bow_cost = DOWNSTREAM_COST_M if downstream else 0.0  # it would hold astern, its rudder at its weakest
             for way in (1.0, -1.0):  # the last FINAL_M ahead or astern, straight along the final heading
                 for short in SHORT_M:  # ending this far short of the goal (the hold brings it the rest of the way)
-                    c, s = way * math.cos(final), way * math.sin(final)
-                    pre = (goal[0] - (short + FINAL_M) * c, goal[1] - (short + FINAL_M) * s, final)
+                    back = (short + FINAL_M) * way * bow  # from the final leg's start to the path's end
+                    pre = (goal[0] - float(back[0]), goal[1] - float(back[1]), final)
                     for path in reeds_shepp.plan(start, pre, r):
                         whole = reeds_shepp.Path(start, r, (*path.segments, ("S", way * FINAL_M / r)))
                         cost = whole.length_m + CUSP_COST_M * whole.cusps + SHORT_COST * short + bow_cost
@@ -119,8 +121,8 @@ class ApproachPath:
         for _, _, path, final in sorted(candidates, key=lambda c: c[:2])[:MAX_CHECKED]:
             coarse = path.sample(CHECK_STEP_M)
             points = np.array([s[:2] for s in coarse])
-            if current_ned is not None:
-                points = np.vstack([points, points + DRIFT_S * np.asarray(current_ned, dtype=float)])
+            if current is not None:
+                points = np.vstack([points, points + DRIFT_S * current])
             if outside is None or float(np.max(outside(points))) <= allowed:
                 self.samples, self.t_planned, self.final_heading = path.sample(STEP_M), t, final
                 self.t_failed = None

@@ -226,8 +226,10 @@ class LineApproach:
     ) -> Maneuver:
         """On the current's line near the goal: into the current only, ahead (bow upstream) or astern (bow
         downstream), never the other way (that would turn the water past the rudder round), at most
-        ``HOLD_MAX_MPS`` over ground; upstream of the goal speed 0 (Rover's stop controller, throttle off): the
-        current carries the boat back, and with no water passing it, it neither turns nor slips across."""
+        ``HOLD_MAX_MPS`` over ground, by a cycle about the goal: creep upstream (at least ``CREEP_MPS``) from
+        ``CREEP_M`` / 2 downstream of it to ``CREEP_M`` / 2 past it, then speed 0 (Rover's stop controller,
+        throttle off) while the current carries the boat back; with the bow off the line, way on (at least
+        ``HOLD_WAY_MPS``) until it is back."""
         c = np.asarray(current_ned, dtype=float)
         up = -c / float(np.hypot(*c))
         self.travel = 1.0 if float(a @ up) > 0.0 else -1.0
@@ -247,8 +249,8 @@ class LineApproach:
         elif to_go < -0.5 * CREEP_M:
             self.creeping = False
         if not (self.creeping or self.righting):
-            # upstream of the goal: speed 0, the current carries the boat back (not while the bow is off the line
-            # and the goal is still near: drifting, no water passes the rudder, and the bow would stay off)
+            # drifting back: speed 0, the current carries the boat (not while the bow is off the line: drifting,
+            # no water passes the rudder, and the bow would stay off)
             return Maneuver(heading, 0.0, self.astern)
         s = self.gain * math.hypot(max(to_go, 0.0), cross)
         if bias_ned is not None:
