@@ -157,18 +157,82 @@ def test_the_probes_hard_turn_goes_to_the_side_that_stays_inside_the_area(law: G
         assert rudder.probe_heading == pytest.approx(wrap_pi(south + side * PROBE_WAY_RAD))
 
 
-def test_in_a_current_the_plan_ends_bow_upstream_and_leaves_room_for_the_drift_downstream(law: GuidanceLaw) -> None:
-    """Current 0.03 m/s toward E, the goal 0.175 m inside the domain's east (downstream) edge: the path ends with
-    the bow upstream (west: the boat then holds ahead, where its rudder works best), and every point of it stays
-    inside the area even when set DRIFT_S of the current downstream."""
-    from koopguide.guidance.law.approach_path import AREA_SLACK_M, DRIFT_S
+TOWARD = st.sampled_from([0.0, 90.0, 180.0, 270.0])
 
-    current = np.array([0.0, 0.03])
-    for start, heading in ((np.array([1.0, -0.8]), math.pi), (np.array([0.4, -0.5]), 0.0)):
+
+@settings(max_examples=30, deadline=None)
+@given(n=st.floats(-0.2, 2.0), e=st.floats(-1.8, 0.1), h=angles, toward=TOWARD)
+def test_in_a_current_the_plan_is_made_in_the_water_and_ends_on_the_line_over_ground(
+    law: GuidanceLaw, n: float, e: float, h: float, toward: float
+) -> None:
+    """A 0.03 m/s current from any side: the path is planned in the water (which moves on while the boat drives
+    it), so that over ground it ends on the current's line through the goal, the bow along it, and over ground it
+    stays in the area even when set DRIFT_S of the current further downstream."""
+    from koopguide.guidance.law.approach_path import AREA_SLACK_M, DRIFT_S, HOLD_ALONG_M
+
+    current = 0.03 * np.array([math.cos(math.radians(toward)), math.sin(math.radians(toward))])
+    upstream = wrap_pi(math.radians(toward) + math.pi)
+    start = np.array([n, e])
+    path = ApproachPath(cruise_mps=0.15, max_speed_mps=0.3)
+    if not path.plan(
+        0.0, start, h, np.zeros(2), (upstream, wrap_pi(upstream + math.pi)), 1.3, law.outside_area, current
+    ):
+        return
+    ground = path.ground_ned
+    assert len(path.times) == len(path.samples) and np.all(np.diff(path.times) >= 0.0)
+    # the water's drift is the current times the planned time: the samples alone do not end at the goal
+    assert np.allclose(ground - np.array([s[:2] for s in path.samples]), np.outer(path.times, current))
+    axis = np.array([math.cos(upstream), math.sin(upstream)])
+    end = ground[-1]
+    assert abs(float(axis[0] * end[1] - axis[1] * end[0])) < 1e-6  # on the line (the drift is along it)
+    assert abs(float(axis @ end)) <= HOLD_ALONG_M  # near enough the goal along it for the hold to take over
+    off = abs(wrap_pi(path.final_heading - upstream))
+    assert min(off, math.pi - off) < 1e-6
+    slack = AREA_SLACK_M + 0.02 + law.outside_area(start)  # and the coarser check between samples
+    assert float(np.max(law.outside_area(np.vstack([ground, ground + DRIFT_S * current])))) <= slack
+
+
+def drive(path: ApproachPath, start: np.ndarray, heading: float, current: np.ndarray, radius_m: float) -> tuple:
+    """An ideal boat that needs way: it holds the commanded speed over ground along its heading (as Rover does),
+    turns toward the commanded heading at most at (speed through the water) / ``radius_m``, and the current
+    carries it. Returns its pose when the path's tracker is done (or after 150 s) and the time."""
+    p, psi, t, dt = start.astype(float), heading, 0.0, 0.05
+    while t < 150.0:
+        m = path.command(t, p, psi, current)
+        if m is None:
+            break
+        h = np.array([math.cos(psi), math.sin(psi)])
+        water = m.speed_mps - float(current @ h)  # through the water along the heading
+        rate = abs(water) / radius_m
+        psi = wrap_pi(psi + max(-rate * dt, min(rate * dt, wrap_pi(m.heading_rad - psi))))
+        p = p + dt * (water * h + current)
+        t += dt
+    return p, psi, t
+
+
+@pytest.mark.parametrize("toward", [0.0, 90.0, 180.0, 270.0])
+def test_a_boat_tracking_the_plan_in_the_water_ends_where_the_plan_said_over_ground(
+    law: GuidanceLaw, toward: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The tracker steers the boat's place in the water (its position less the current's drift since the plan):
+    an ideal rudder boat driving it in a current ends on the current's line at the goal, bow along the line. Its
+    reversals are instant (a real boat's take about CUSP_S), so it may end a little early, upstream along the line."""
+    from koopguide.guidance.law import approach_path
+
+    monkeypatch.setattr(approach_path, "REPLAN_S", 1e3)  # the whole path, not a fresh plan every 20 s
+    current = 0.03 * np.array([math.cos(math.radians(toward)), math.sin(math.radians(toward))])
+    upstream = wrap_pi(math.radians(toward) + math.pi)
+    axis = np.array([math.cos(upstream), math.sin(upstream)])
+    ends = (upstream, wrap_pi(upstream + math.pi))
+    for start, heading in ((np.array([1.0, -0.8]), math.pi), (np.array([0.8, -1.2]), 0.0)):
         path = ApproachPath(cruise_mps=0.15, max_speed_mps=0.3)
-        ends = (-math.pi / 2, math.pi / 2)
         assert path.plan(0.0, start, heading, np.zeros(2), ends, 1.3, law.outside_area, current)
-        assert path.final_heading == pytest.approx(-math.pi / 2)  # bow upstream
-        pts = np.array([s[:2] for s in path.samples])
-        drifted = float(np.max(law.outside_area(pts + DRIFT_S * current)))
-        assert drifted <= AREA_SLACK_M + 0.02 + law.outside_area(start)  # and the coarser check between samples
+        planned_end, final = path.ground_ned[-1], path.final_heading
+        reversals = sum(a[3] != b[3] for a, b in itertools.pairwise(path.samples))
+        p, psi, t = drive(path, start, heading, current, radius_m=1.2)
+        assert t < 150.0  # the tracker finished the path
+        miss = p - planned_end
+        assert abs(float(axis[0] * miss[1] - axis[1] * miss[0])) < 0.1, (p, planned_end)  # across the line
+        early = approach_path.CUSP_S * reversals * 0.03  # how far upstream the instant reversals leave it
+        assert -0.1 <= float(axis @ miss) <= early + 0.1, (p, planned_end)  # along the line
+        assert abs(wrap_pi(psi - final)) < math.radians(15.0)

@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from koopguide.guidance.estimation.turning import RATE_FLOOR, TurnAbility
+from koopguide.guidance.law.approach_path import ApproachPath
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
 from koopguide.guidance.law.line_approach import CREEP_M, CREEP_MPS, LineApproach
 from koopguide.guidance.law.maneuver import ASTERN_RAD, MIN_SPEED_MPS, Maneuver, ManeuverPlanner, wrap_pi
@@ -226,3 +227,23 @@ def test_holding_in_a_current_creeps_upstream_across_the_goal_then_drifts_back_a
     creep, drift = cycle[:3] + cycle[-1:], cycle[3:6]
     assert all(m.speed_mps >= CREEP_MPS and not m.astern for m in creep)  # ahead, upstream
     assert all(m.speed_mps == 0.0 for m in drift)  # the current carries it back
+
+
+def test_a_planned_path_is_driven_to_its_end_before_the_hold_takes_over() -> None:
+    """0.3 m downstream of the goal on the current's line (toward W), the bow 20 deg off upstream: near enough to
+    hold, but a planned path under way is driven to its end first (its last leg lines the bow up); once it is
+    done, the hold takes over from the same pose."""
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15)
+    goal, current = np.zeros(2), np.array([0.0, -0.03])  # upstream is east
+    p, heading = np.array([0.0, -0.3]), math.radians(110.0)
+    line.aim(p, goal, heading, current)
+    assert line.path.plan(0.0, p, heading, goal, (math.pi / 2, -math.pi / 2), 1.3, None, current)
+    m = line.command(p, goal, heading, radius_m=1.3, current_ned=current, t=0.05)
+    assert not line.holding and line.path.active
+    line.path.reset()  # the path driven (or abandoned): the same pose is held
+    line.command(p, goal, heading, radius_m=1.3, current_ned=current, t=0.1)
+    assert line.holding
+    fresh = ApproachPath(cruise_mps=0.15, max_speed_mps=0.3)  # the path's own command, not the hold's
+    assert fresh.plan(0.0, p, heading, goal, (math.pi / 2, -math.pi / 2), 1.3, None, current)
+    expected = fresh.command(0.05, p, heading, current)
+    assert expected is not None and m.heading_rad == pytest.approx(expected.heading_rad)

@@ -28,19 +28,6 @@ ESTIMATE_SLACK_M = 0.01  # the service decides on its estimate; the truth may di
 TOWARD_DEG = {"N": 0.0, "E": 90.0, "S": 180.0, "W": 270.0}
 
 
-# Known failure (issue 10, docs/missions.md): the simulator's rudder boat turns on a circle of 1.3-2 m radius at
-# the speeds it can reach, most of the paper's 4.5 m x 3 m tank; its planned approaches arrive in nearly every run
-# but the hold's worst moment stays within 0.2 m in some, not all (righting the bow onto the line costs R times
-# the angle of way through the water). From this start, at the last stop: toward N passed; toward E did not
-# arrive in 75 s, toward S and W held within 1.8 and 0.48 m. The bounds are unchanged.
-RUDDER = pytest.param(
-    "rudder",
-    marks=pytest.mark.xfail(
-        reason="rudder boat: turning circle 2.6-4 m across in a 3 m wide tank; issue 10 open (docs/missions.md)"
-    ),
-)
-
-
 def current(direction_deg: float) -> dict:
     return {"kinds": ["uniform"], "uniform": {"speed_mps": 0.03, "direction_deg": direction_deg}}
 
@@ -56,7 +43,7 @@ def arrived_intervals(transitions: list[tuple[float, str]], t_end: float) -> lis
 
 @pytest.mark.timeout(180)
 @pytest.mark.parametrize("toward", list(TOWARD_DEG))
-@pytest.mark.parametrize("vehicle", ["diff_thrust", RUDDER, "vectored"])
+@pytest.mark.parametrize("vehicle", ["diff_thrust", "rudder", "vectored"])
 def test_each_vehicle_arrives_and_keeps_station_in_a_current_from_each_side(
     zshape_model: Path, vehicle: str, toward: str
 ) -> None:

@@ -9,7 +9,10 @@ turn (the autopilot reverses the rudder astern, docs/rover.md). Three modes, one
   shortest Reeds-Shepp path onto an end of the line (law/approach_path.py), planned again when the boat
   leaves it;
 * on the line near the goal (``HOLD_*``, left beyond ``LEAVE_*``): feedback; in a current into the current
-  only (:meth:`LineApproach._hold_in_current`), in still water ahead or astern along the line;
+  only (:meth:`LineApproach._hold_in_current`), in still water ahead or astern along the line. A planned path
+  is driven to its end before the hold takes over: its last leg lines the bow up with the line (taken over
+  mid-path, a hold began up to ``HOLD_RAD`` off, and turning the bow back with way on carried the boat
+  0.3-0.5 m past the goal);
 * otherwise (no circle measured yet, or no path fits): line-of-sight guidance onto the line with K-turns,
   reversing before the area's edge, as below.
 
@@ -48,7 +51,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from koopguide.guidance.law.approach_path import ApproachPath
+from koopguide.guidance.law.approach_path import HOLD_ALONG_M, ApproachPath
 from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, unit, wrap_pi
 
 MIN_DELTA_M = 0.3  # the smallest LOS look-ahead [m]
@@ -59,7 +62,7 @@ FLIP_M = 0.03  # on the line: ahead <-> astern once the goal is this far behind 
 LEASH_M = 0.3  # while turning (a K-turn): the boat goes on this far past the goal before it reverses [m]
 TURNING_RAD = math.radians(20.0)  # a heading error this large is a turn: keep way on
 K_TURN_RAD = math.radians(45.0)  # ... and this large a K-turn about the goal
-HOLD_CROSS_M, HOLD_RAD, HOLD_ALONG_M = 0.1, math.radians(25.0), 0.6  # on the line near the goal: feedback only
+HOLD_CROSS_M, HOLD_RAD = 0.1, math.radians(25.0)  # on the line near the goal: feedback only (and HOLD_ALONG_M)
 LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.4, math.radians(60.0), 0.8  # ... until beyond these: a planned approach
 HOLD_WAY_MPS = 0.06  # holding in a current, turning: at least this over ground into it [m/s]
 HOLD_MAX_MPS = 0.1  # ... and never more than this [m/s]
@@ -280,7 +283,12 @@ class LineApproach:
             leave_cross = LEAVE_CROSS_M if self.in_current else 2.0 * self.settle_m
             self.holding = abs(cross) <= leave_cross and facing <= LEAVE_RAD and abs(along) <= LEAVE_ALONG_M
         else:
-            self.holding = abs(cross) <= HOLD_CROSS_M and facing <= HOLD_RAD and abs(along) <= HOLD_ALONG_M
+            near = abs(cross) <= HOLD_CROSS_M and facing <= HOLD_RAD and abs(along) <= HOLD_ALONG_M
+            if near and self.path.active:  # a planned path is driven to its end first (its last leg lines the bow up)
+                m = self.path.command(t, p, heading_rad, current_ned)
+                if m is not None:
+                    return m
+            self.holding = near
         if self.holding or radius_m is None:  # holding; or its turning circle not yet seen: nothing to plan with
             self.path.reset()
             return None
@@ -288,7 +296,7 @@ class LineApproach:
             off = abs(wrap_pi(self.path.final_heading - self.axis_rad))
             if min(off, math.pi - off) > REPLAN_OFF_LINE_RAD:  # planned before the current was known: not its line
                 self.path.reset()
-        m = self.path.command(t, p, heading_rad) if self.path.active else None
+        m = self.path.command(t, p, heading_rad, current_ned) if self.path.active else None
         if m is None and self.path.may_plan(t):
             ends = (self.axis_rad, wrap_pi(self.axis_rad + math.pi)) if self.in_current else None  # either end
             goal = np.asarray(goal_ned, dtype=float)
@@ -298,7 +306,7 @@ class LineApproach:
             if self.in_current:
                 final = min((self.axis_rad, wrap_pi(self.axis_rad + math.pi)), key=lambda a: abs(wrap_pi(a - final)))
             self.axis_rad, self.travel = final, None
-            m = self.path.command(t, p, heading_rad)
+            m = self.path.command(t, p, heading_rad, current_ned)
         return m
 
     @staticmethod
