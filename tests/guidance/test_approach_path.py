@@ -236,3 +236,19 @@ def test_a_boat_tracking_the_plan_in_the_water_ends_where_the_plan_said_over_gro
         early = approach_path.CUSP_S * reversals * 0.03  # how far upstream the instant reversals leave it
         assert -0.1 <= float(axis @ miss) <= early + 0.1, (p, planned_end)  # along the line
         assert abs(wrap_pi(psi - final)) < math.radians(15.0)
+
+
+def test_a_path_is_planned_again_once_the_water_moves_otherwise_than_planned(law: GuidanceLaw) -> None:
+    """The path lies in water moving at the plan's current: while the estimate stays within REPLAN_CURRENT_MPS
+    of it the boat is tracked on; once it differs by more (a vortex, a gyre: the boat has reached other water),
+    the tracker gives the path up and the boat gets a new one."""
+    from koopguide.guidance.law.approach_path import REPLAN_CURRENT_MPS
+
+    current = np.array([0.0, 0.03])
+    path = ApproachPath(cruise_mps=0.15, max_speed_mps=0.3)
+    start, heading = np.array([1.0, -0.8]), math.pi
+    assert path.plan(0.0, start, heading, np.zeros(2), (-math.pi / 2, math.pi / 2), 1.3, law.outside_area, current)
+    near = current + np.array([0.8 * REPLAN_CURRENT_MPS, 0.0])
+    assert path.command(0.1, start, heading, near) is not None and path.active
+    other = current + np.array([1.2 * REPLAN_CURRENT_MPS, 0.0])
+    assert path.command(0.2, start, heading, other) is None and not path.active
