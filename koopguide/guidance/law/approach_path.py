@@ -54,8 +54,7 @@ from collections.abc import Callable
 import numpy as np
 
 from koopguide.guidance.law import reeds_shepp
-from koopguide.guidance.law.command import CURRENT_MIN_MPS
-from koopguide.guidance.law.maneuver import Maneuver, unit, wrap_pi
+from koopguide.guidance.law.maneuver import Maneuver, unit, water_current, wrap_pi
 
 STEP_M = 0.05  # path sample spacing [m]
 CHECK_STEP_M = 0.1  # ... when checking a candidate against the area and the goal [m]
@@ -87,12 +86,6 @@ ARRIVAL_ITERATIONS = 3  # the goal's place in the water when the boat gets there
 WATER_MARGIN_MPS = 0.02  # through the water at least this much faster than the current (or the rudder misreads)
 
 
-def water_current(current_ned: np.ndarray | None) -> np.ndarray:
-    """The current the path is planned and tracked in [m/s]: the estimate, or none below ``CURRENT_MIN_MPS``."""
-    c = np.zeros(2) if current_ned is None else np.asarray(current_ned, dtype=float)
-    return c if float(np.hypot(*c)) >= CURRENT_MIN_MPS else np.zeros(2)
-
-
 class ApproachPath:
     """Plan with :meth:`plan`, then call :meth:`command` each tick (None: no path, or its end reached)."""
 
@@ -103,13 +96,11 @@ class ApproachPath:
         self.t_planned: float | None = None
         self.final_heading: float | None = None  # the bow's direction at the path's end [rad]
         self.t_failed: float | None = None  # vehicle time of the last plan that found nothing [s]
-        self.drift = np.zeros(2)  # how far the water has moved since the plan (the samples are in the water) [m]
         self.times = np.zeros(0)  # when the boat is to reach each sample [s after the plan]
         self.current = np.zeros(2)  # the current the plan was made in [m/s]
 
     def reset(self) -> None:
         self.samples, self.i, self.t_planned, self.final_heading = [], 0, None, None
-        self.drift = np.zeros(2)
         self.times, self.current = np.zeros(0), np.zeros(2)
 
     @property
@@ -141,7 +132,7 @@ class ApproachPath:
         here = 0.0 if outside is None else float(outside(np.asarray(p_ned, dtype=float)[None, :])[0])
         allowed = AREA_SLACK_M + here
         c = water_current(current_ned)
-        floor = self._floor(c)
+        moving, floor = bool(c.any()), self._floor(c)
         candidates = []
         for k, final in enumerate(final_headings):
             bow = unit(final)
@@ -154,12 +145,10 @@ class ApproachPath:
                     # be in the water when the boat gets there, T later (fixed point on the shortest path's T)
                     arrival_s, paths = 0.0, []
                     for _ in range(ARRIVAL_ITERATIONS):
-                        pre = goal - back - c * arrival_s
-                        paths = [
-                            self._whole(start, (float(pre[0]), float(pre[1]), final), path, way, r)
-                            for path in reeds_shepp.plan(start, (float(pre[0]), float(pre[1]), final), r)
-                        ]
-                        if not paths or not c.any():
+                        n, e = goal - back - c * arrival_s
+                        pre = (float(n), float(e), final)
+                        paths = [self._whole(start, pre, path, way, r) for path in reeds_shepp.plan(start, pre, r)]
+                        if not paths or not moving:
                             break
                         arrival_s = float(self._times(paths[0].sample(CHECK_STEP_M), floor)[-1])
                     for whole in paths:
@@ -169,16 +158,17 @@ class ApproachPath:
         # the cheapest that stays in the area over ground (the water's drift added), MAX_CHECKED at most; in still
         # water checked on a coarser sampling (in a current the timing of every sample matters)
         for _, _, path, final in sorted(candidates, key=lambda c: c[:2])[:MAX_CHECKED]:
-            samples = path.sample(STEP_M if c.any() else CHECK_STEP_M)
-            times = self._times(samples, floor)
-            points = np.array([s[:2] for s in samples]) + np.outer(times, c)
-            if c.any() and float(np.hypot(*(points[-1] - goal))) > HOLD_ALONG_M:
-                continue  # its timing differs from the shortest path's: over ground it ends too far off the goal
-            if c.any():
+            samples = path.sample(STEP_M if moving else CHECK_STEP_M)
+            points = np.array([s[:2] for s in samples])
+            if moving:
+                times = self._times(samples, floor)
+                points = points + np.outer(times, c)
+                if float(np.hypot(*(points[-1] - goal))) > HOLD_ALONG_M:
+                    continue  # its timing differs from the shortest path's: over ground it ends too far off the goal
                 points = np.vstack([points, points + DRIFT_S * c])
             if outside is None or float(np.max(outside(points))) <= allowed:
-                self.samples = samples if c.any() else path.sample(STEP_M)
-                self.times = times if c.any() else self._times(self.samples, floor)
+                self.samples = samples if moving else path.sample(STEP_M)
+                self.times = times if moving else self._times(self.samples, floor)
                 self.t_planned, self.final_heading, self.current = t, final, c
                 self.t_failed = None
                 return True
@@ -241,8 +231,8 @@ class ApproachPath:
         if not self.samples or self.t_planned is None:
             return None
         c = water_current(current_ned)
-        self.drift = self.current * max(t - self.t_planned, 0.0)  # the water moves on as the plan assumed
-        p = np.asarray(p_ned, dtype=float) - self.drift
+        # the boat's place in the water: the water has moved on as the plan assumed
+        p = np.asarray(p_ned, dtype=float) - self.current * max(t - self.t_planned, 0.0)
         end = self._run_end(self.i)
         window = range(self.i, min(end, self.i + SEARCH) + 1)
         self.i = min(window, key=lambda k: math.hypot(self.samples[k][0] - p[0], self.samples[k][1] - p[1]))

@@ -51,6 +51,13 @@ def unit(angle_rad: float) -> np.ndarray:
     return np.array([math.cos(angle_rad), math.sin(angle_rad)])
 
 
+def water_current(current_ned: np.ndarray | None) -> np.ndarray:
+    """The current the water moves at [m/s]: the estimate, or none (zeros) when absent or below
+    ``CURRENT_MIN_MPS``."""
+    c = np.zeros(2) if current_ned is None else np.asarray(current_ned, dtype=float)
+    return c if float(np.hypot(*c)) >= CURRENT_MIN_MPS else np.zeros(2)
+
+
 @dataclass(frozen=True)
 class Maneuver:
     """A heading-and-speed command: ``speed_mps`` over ground along ``heading_rad`` (negative: backward over
@@ -94,9 +101,7 @@ class ManeuverPlanner:
         needs way keeps ``way_mps`` while it turns.
         """
         v = np.asarray(v_ground, dtype=float)
-        c = np.zeros(2) if current_ned is None else np.asarray(current_ned, dtype=float)
-        if float(np.hypot(*c)) < CURRENT_MIN_MPS:
-            c = np.zeros(2)
+        c = water_current(current_ned)
         w = v - c  # through the water
         if float(np.hypot(*w)) <= 1e-9:  # drifting with the current is wanted (or nothing at all): speed exactly 0
             return Maneuver(heading_rad, 0.0, self.astern)  # is Rover's stop controller, throttle off: it drifts
