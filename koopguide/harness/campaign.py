@@ -121,7 +121,10 @@ def streamline(
 
 
 def distance_to_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
-    """Distance of each of ``points`` (T, 2) to the polyline ``line`` (K, 2) [m]."""
+    """Distance of each of ``points`` (T, 2) to the polyline ``line`` (K, 2) [m]; a one-point line (a start already
+    within the arrival radius: its streamline ends where it begins) is that point."""
+    if len(line) == 1:
+        return np.hypot(*(points - line[0]).T)
     a, b = line[:-1], line[1:]
     ab = b - a
     length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
