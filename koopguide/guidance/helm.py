@@ -44,7 +44,11 @@ class Helm:
         self.ability = TurnAbility()
         self.planner = ManeuverPlanner(cfg.command.max_speed_mps, cfg.command.turn_speed_mps)
         self.line = LineApproach(
-            cfg.command.max_speed_mps, cfg.arrival.station_gain, 0.5 * cfg.arrival.radius_m, cfg.command.turn_speed_mps
+            cfg.command.max_speed_mps,
+            cfg.arrival.station_gain,
+            0.5 * cfg.arrival.radius_m,
+            cfg.command.turn_speed_mps,
+            cfg.command.approach_speed_mps,
         )
         self.speed_mps = 0.0  # the boat's ground speed at the last observation [m/s]
         self.water_mps = 0.0  # ... and its speed through the water along its heading (negative: astern) [m/s]

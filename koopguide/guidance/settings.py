@@ -83,6 +83,7 @@ class CommandSettings:
     max_speed_mps: Annotated[float, Range(0.0, 20.0, lo_open=True)]
     min_speed_mps: Speed
     turn_speed_mps: Speed  # a boat that needs way to turn (a rudder boat) keeps at least this while turning
+    approach_speed_mps: Speed  # ... and drives its planned approach at this speed through the water (at most)
     probe_turn_s: Annotated[float, Range(0.0, 30.0)]  # at the start, ask a turn in place this long at most (0: off)
     turn_slowdown: bool
     current_compensation: bool
@@ -98,6 +99,12 @@ class CommandSettings:
             "command.min_speed_mps",
             self.min_speed_mps,
             f"0 .. max_speed_mps ({self.max_speed_mps})",
+        )
+        check(
+            self.approach_speed_mps >= self.turn_speed_mps,
+            "command.approach_speed_mps",
+            self.approach_speed_mps,
+            f"at least turn_speed_mps ({self.turn_speed_mps})",
         )
 
 

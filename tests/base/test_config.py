@@ -39,6 +39,10 @@ def test_yaml_numbers_are_read_the_yaml_1_2_way(tmp_path: Path):
         ("frame:\n  goal_ned: [0, .inf]\n", "frame.goal_ned[1]: inf is out of range"),
         ("status:\n  rate_hz: 0\n", "status.rate_hz: 0.0 is out of range (expected a number in (0, 50])"),
         ("command:\n  max_speed_mps: '0.3'\n", "command.max_speed_mps: expected a number, got '0.3' (str)"),
+        (
+            "command:\n  approach_speed_mps: 0.1\n",
+            "command.approach_speed_mps: 0.1 is out of range (expected at least turn_speed_mps (0.15))",
+        ),
     ],
 )
 def test_absurd_numbers_are_one_line_errors_naming_the_key(tmp_path: Path, text: str, message: str):

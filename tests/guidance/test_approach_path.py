@@ -252,3 +252,28 @@ def test_a_path_is_planned_again_once_the_water_moves_otherwise_than_planned(law
     assert path.command(0.1, start, heading, near) is not None and path.active
     other = current + np.array([1.2 * REPLAN_CURRENT_MPS, 0.0])
     assert path.command(0.2, start, heading, other) is None and not path.active
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    toward=angles,
+    c=st.floats(0.0, 0.09),
+    h=angles,
+    along=st.floats(0.0, 1.0),
+)
+def test_a_tracked_path_never_asks_more_than_max_speed_over_ground_in_a_current_from_any_side(
+    toward: float, c: float, h: float, along: float
+) -> None:
+    # cruising at 0.25 m/s through the water with the current from astern, the speed over ground Rover holds would
+    # be 0.25 + c: the tracker caps it at max_speed (what the boat then loses through the water is the current's)
+    path = ApproachPath(cruise_mps=0.25, max_speed_mps=0.3)
+    current = c * np.array([math.cos(toward), math.sin(toward)])
+    if not path.plan(0.0, np.array([0.0, 0.0]), h, np.array([3.0, 0.0]), None, 1.5, None, current):
+        return
+    k = min(len(path.samples) - 1, round(along * (len(path.samples) - 1)))
+    n, e, heading, _ = path.samples[k]
+    t = float(path.times[k])
+    m = path.command(t, np.array([n, e]) + current * t, heading, current)
+    assert m is None or abs(m.speed_mps) <= 0.3 + 1e-12
+    if m is not None and k + 3 < len(path.samples) and c < 0.04:
+        assert abs(m.speed_mps) > 0.0  # ... yet it moves

@@ -132,7 +132,7 @@ def test_turn_ability_tells_a_pivoting_boat_from_one_that_needs_way() -> None:
 
 @pytest.mark.parametrize("current", [None, np.array([0.03, 0.0])])
 def test_line_approach_backs_down_onto_the_goal_and_steers_onto_the_line(current) -> None:
-    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15)
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.15)
     goal = np.zeros(2)
     p = np.array([-0.5, 0.2])  # 0.5 m south of the goal, 0.2 m east of it
     line.aim(p, goal, heading_rad=math.pi, current_ned=current)  # the boat faces south
@@ -178,7 +178,7 @@ def test_ahead_goes_as_velocity_only_and_astern_or_a_hold_with_the_yaw() -> None
 def test_line_approach_k_turns_toward_one_heading_ahead_then_astern_about_where_it_began() -> None:
     """At the goal, facing across the current's line: legs ahead and astern in turn, both toward the same heading
     (the autopilot reverses the rudder astern, so both legs turn the bow the same way)."""
-    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15)
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.15)
     goal, current, heading = np.zeros(2), np.array([0.03, 0.0]), math.pi / 2  # current toward N, bow E
     line.aim(goal, goal, heading, current)
     first = line.command(goal, goal, heading, radius_m=1.3, current_ned=current)
@@ -192,7 +192,7 @@ def test_line_approach_k_turns_toward_one_heading_ahead_then_astern_about_where_
 
 
 def test_line_approach_reverses_before_the_area_edge_and_lets_the_current_carry_it_where_the_rudder_would_err() -> None:
-    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15)
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.15)
     goal = np.zeros(2)
     p = np.array([0.0, -0.6])  # 0.6 m west of the goal, on the line of a still-water approach, bow east
     line.aim(p, goal, math.pi / 2, None)
@@ -202,7 +202,7 @@ def test_line_approach_reverses_before_the_area_edge_and_lets_the_current_carry_
     # bow upstream (current toward N, bow S), 0.04 m upstream of the goal: backing down at 0.02 m/s over ground would
     # still have the water pass the rudder from ahead; the service sends speed 0 (throttle off) and the current
     # carries the boat back
-    hold = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15)
+    hold = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.15)
     current, p = np.array([0.03, 0.0]), np.array([-0.04, 0.0])
     hold.aim(p, goal, math.pi, current)
     assert hold.command(p, goal, math.pi, radius_m=1.3, current_ned=current).speed_mps == 0.0
@@ -212,7 +212,7 @@ def test_holding_in_a_current_creeps_upstream_across_the_goal_then_drifts_back_a
     """A cycle about the goal long enough for the rudder to act: the boat creeps CREEP_M upstream (way on, at
     least CREEP_MPS over ground) from half of it downstream of the goal, then drifts back with the throttle off
     (speed 0) as far, not in bursts of a few centimetres (the bow would not answer them)."""
-    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.075, way_mps=0.15)
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.075, way_mps=0.15, approach_mps=0.15)
     goal, current, bow = np.zeros(2), np.array([0.03, 0.0]), math.pi  # current toward N, bow upstream (S)
 
     def at(north: float) -> Maneuver:
@@ -233,7 +233,7 @@ def test_a_planned_path_is_driven_to_its_end_before_the_hold_takes_over() -> Non
     """0.3 m downstream of the goal on the current's line (toward W), the bow 20 deg off upstream: near enough to
     hold, but a planned path under way is driven to its end first (its last leg lines the bow up); once it is
     done, the hold takes over from the same pose."""
-    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15)
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.15)
     goal, current = np.zeros(2), np.array([0.0, -0.03])  # upstream is east
     p, heading = np.array([0.0, -0.3]), math.radians(110.0)
     line.aim(p, goal, heading, current)

@@ -90,7 +90,8 @@ class ApproachPath:
     """Plan with :meth:`plan`, then call :meth:`command` each tick (None: no path, or its end reached)."""
 
     def __init__(self, cruise_mps: float, max_speed_mps: float) -> None:
-        self.cruise = min(cruise_mps, max_speed_mps)
+        self.cruise = min(cruise_mps, max_speed_mps)  # through the water [m/s]
+        self.max_speed = max_speed_mps  # over ground along the heading, what Rover holds [m/s]
         self.samples: list[tuple[float, float, float, float]] = []  # (N, E, heading, direction)
         self.i = 0  # progress along the samples
         self.t_planned: float | None = None
@@ -261,4 +262,5 @@ class ApproachPath:
         heading = course if direction > 0 else wrap_pi(course + math.pi)
         speed = min(self.cruise, max(self._floor(c), STOP_GAIN * remaining))  # through the water
         over_ground = direction * speed + float(c @ unit(heading))  # Rover holds the speed over ground
-        return Maneuver(heading, over_ground, direction < 0)
+        # ... never faster than max_speed (with the current from astern, cruise plus the current could be)
+        return Maneuver(heading, min(self.max_speed, max(-self.max_speed, over_ground)), direction < 0)

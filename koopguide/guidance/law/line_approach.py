@@ -79,7 +79,9 @@ class LineApproach:
     """LOS guidance onto the line through the goal with bow direction ``axis_rad`` (set by :meth:`aim`), ahead
     and astern by turns."""
 
-    def __init__(self, max_speed_mps: float, gain_per_s: float, settle_m: float, way_mps: float) -> None:
+    def __init__(
+        self, max_speed_mps: float, gain_per_s: float, settle_m: float, way_mps: float, approach_mps: float
+    ) -> None:
         self.max_speed = max_speed_mps
         self.settle_m = settle_m  # an offset across the line this small is "on the line" [m]
         self.gain = gain_per_s
@@ -89,7 +91,7 @@ class LineApproach:
         self.travel: float | None = None  # toward the goal along the line: +1 along the axis, -1 against it
         self.astern = False  # the boat is to move stern first (on the line: travel -1; in a K-turn: by legs)
         self.pivot: np.ndarray | None = None  # where the K-turn under way began [m]
-        self.path = ApproachPath(way_mps, max_speed_mps)  # a planned approach onto the line, while far from it
+        self.path = ApproachPath(approach_mps, max_speed_mps)  # a planned approach onto the line, while far from it
         self.holding = False  # on the line near the goal: feedback only (hysteresis on HOLD_* / LEAVE_*)
         self.righting = False  # holding in a current, the bow off the line: way on until it is back (hysteresis)
         self.creeping = False  # ... creeping upstream past the goal (else drifting back onto it)
