@@ -54,7 +54,7 @@ from collections.abc import Callable
 import numpy as np
 
 from koopguide.guidance.law import reeds_shepp
-from koopguide.guidance.law.maneuver import Maneuver, unit, water_current, wrap_pi
+from koopguide.guidance.law.maneuver import Maneuver, capped, unit, water_current, wrap_pi
 
 STEP_M = 0.05  # path sample spacing [m]
 CHECK_STEP_M = 0.1  # ... when checking a candidate against the area and the goal [m]
@@ -263,4 +263,4 @@ class ApproachPath:
         speed = min(self.cruise, max(self._floor(c), STOP_GAIN * remaining))  # through the water
         over_ground = direction * speed + float(c @ unit(heading))  # Rover holds the speed over ground
         # ... never faster than max_speed (with the current from astern, cruise plus the current could be)
-        return Maneuver(heading, min(self.max_speed, max(-self.max_speed, over_ground)), direction < 0)
+        return Maneuver(heading, capped(over_ground, self.max_speed), direction < 0)

@@ -52,7 +52,7 @@ from collections.abc import Callable
 import numpy as np
 
 from koopguide.guidance.law.approach_path import HOLD_ALONG_M, ApproachPath
-from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, unit, wrap_pi
+from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, capped, unit, wrap_pi
 
 MIN_DELTA_M = 0.3  # the smallest LOS look-ahead [m]
 MAX_DELTA_M = 1.0  # the largest: a longer one only delays the turn onto the line (K-turns make up the rest) [m]
@@ -212,7 +212,7 @@ class LineApproach:
             s += float(np.asarray(bias_ned, dtype=float) @ unit(heading))  # the PI's integral along the heading
         if turning:
             s = sign * max(self.way, sign * s)  # a rudder turns the boat only with way on
-        s = min(self.max_speed, max(-self.max_speed, s))
+        s = capped(s, self.max_speed)
         if s * sign < MIN_SPEED_MPS:  # toward the goal the other way than the boat is going: let it lie
             s = 0.0
         return self._finish(Maneuver(heading, s, self.astern), heading_rad, current_ned, water_mps)

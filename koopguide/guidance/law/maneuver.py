@@ -51,6 +51,11 @@ def unit(angle_rad: float) -> np.ndarray:
     return np.array([math.cos(angle_rad), math.sin(angle_rad)])
 
 
+def capped(speed_mps: float, max_speed_mps: float) -> float:
+    """A signed speed (negative: astern) [m/s] with its size capped at ``max_speed_mps``."""
+    return min(max_speed_mps, max(-max_speed_mps, speed_mps))
+
+
 def water_current(current_ned: np.ndarray | None) -> np.ndarray:
     """The current the water moves at [m/s]: the estimate, or none (zeros) when absent or below
     ``CURRENT_MIN_MPS``."""
