@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from koopguide.guidance.estimation.turning import RATE_FLOOR, TurnAbility
 from koopguide.guidance.law.approach_path import ApproachPath
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
-from koopguide.guidance.law.line_approach import CREEP_M, CREEP_MPS, LineApproach
+from koopguide.guidance.law.line_approach import CREEP_M, CREEP_MPS, EDGE_LEG_M, LineApproach
 from koopguide.guidance.law.maneuver import ASTERN_RAD, MIN_SPEED_MPS, Maneuver, ManeuverPlanner, wrap_pi
 from koopguide.mavlink.rover import MASK_VELOCITY_YAW, velocity_setpoint
 
@@ -247,3 +247,28 @@ def test_a_planned_path_is_driven_to_its_end_before_the_hold_takes_over() -> Non
     assert fresh.plan(0.0, p, heading, goal, (math.pi / 2, -math.pi / 2), 1.3, None, current)
     expected = fresh.command(0.05, p, heading, current)
     assert expected is not None and m.heading_rad == pytest.approx(expected.heading_rad)
+
+
+def test_a_reversal_at_the_area_edge_keeps_its_new_way_for_a_leg_so_the_bow_can_turn() -> None:
+    """Reversed before the edge, the boat backs away EDGE_LEG_M before it goes ahead again: not a shuttle of a few
+    centimetres each way (each reversal holds the heading while the boat stops, so the bow never turned, and a boat
+    in the area's corner saw-toothed there for a minute)."""
+    goal, bow = np.zeros(2), math.pi / 2  # bow east, toward the goal beyond an edge at E -0.5
+
+    def outside(q: np.ndarray) -> float:
+        return max(float(q[1]) + 0.5, 0.0)
+
+    def at(line: LineApproach, east: float) -> Maneuver:
+        p = np.array([0.0, east])
+        line.aim(p, goal, bow, None)
+        return line.command(p, goal, bow, radius_m=1.0, speed_mps=0.2, outside=outside)
+
+    def approach() -> LineApproach:
+        return LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.15)
+
+    assert not at(approach(), -0.75).astern  # 0.25 m from the edge, ahead does not yet lead out
+    line = approach()
+    assert at(line, -0.6).astern  # 0.1 m from it, ahead would: reversed
+    for east in (-0.65, -0.75, -0.6 - EDGE_LEG_M + 0.02):  # backing away, the leg goes on
+        assert at(line, east).astern, east
+    assert not at(line, -0.6 - EDGE_LEG_M - 0.02).astern  # the leg driven: ahead again

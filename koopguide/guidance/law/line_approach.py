@@ -32,8 +32,10 @@ turn (the autopilot reverses the rudder astern, docs/rover.md). Three modes, one
 * ahead or astern: as the way of travel, except in a K-turn (heading error beyond ``K_TURN_RAD``), when the
   boat goes ahead and astern in turn, each leg ``LEASH_M`` past where the K-turn began, all toward the same
   heading; and it reverses before it leaves the area it may use (the model's domain and the geofence,
-  ``outside``), where a tank's walls or the shore may be. After a reversal the heading is held until the
-  water passes the rudder the new way (before that the rudder turns the boat the wrong way);
+  ``outside``), where a tank's walls or the shore may be, and keeps the new way for ``EDGE_LEG_M`` (a boat that
+  went the other way again as soon as that no longer led out shuttled a few centimetres each way in the area's
+  corner for a minute, its bow never turning: every reversal holds the heading). After a reversal the heading is
+  held until the water passes the rudder the new way (before that the rudder turns the boat the wrong way);
 * the speed over ground along the heading: at least the way the rudder needs (``way_mps``) while turning,
   else ``gain`` times the distance to the goal plus the station keeper's integral term along the heading
   (PI with anti-windup, law/station.py: what holds a boat whose speed loop is not over ground); in a
@@ -72,6 +74,7 @@ SWAP_RAD = math.radians(30.0)  # hysteresis of the bow's end of the line (past 9
 EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed (or EDGE_MIN_M) leaves the area
 EDGE_MIN_M = 0.15  # [m]
 EDGE_SLANT = math.sin(math.radians(20.0))  # ... "leaves" when at least this fraction of the look goes outward
+EDGE_LEG_M = 0.3  # after a reversal at the edge the boat keeps its new way this far (the bow turns on the way) [m]
 EDGE_COURSE_M = 0.5  # a course along the line "leads out" when the point this far along it is farther out [m]
 
 
@@ -91,6 +94,7 @@ class LineApproach:
         self.travel: float | None = None  # toward the goal along the line: +1 along the axis, -1 against it
         self.astern = False  # the boat is to move stern first (on the line: travel -1; in a K-turn: by legs)
         self.pivot: np.ndarray | None = None  # where the K-turn under way began [m]
+        self.edge_leg: tuple[np.ndarray, bool] | None = None  # where a reversal at the area's edge began [m], its way
         self.path = ApproachPath(approach_mps, max_speed_mps)  # a planned approach onto the line, while far from it
         self.holding = False  # on the line near the goal: feedback only (hysteresis on HOLD_* / LEAVE_*)
         self.righting = False  # holding in a current, the bow off the line: way on until it is back (hysteresis)
@@ -98,6 +102,7 @@ class LineApproach:
 
     def reset(self) -> None:
         self.axis_rad, self.astern, self.in_current, self.travel, self.pivot = None, False, False, None, None
+        self.edge_leg = None
         self.path.reset()
         self.holding = self.righting = self.creeping = False
 
@@ -201,10 +206,21 @@ class LineApproach:
             self.astern = self.travel < 0
         if outside is not None:  # reverse before the area's edge, or back into it (unless the other way is worse)
             look = max(EDGE_MIN_M, EDGE_LOOK_S * speed_mps)
-            sign = -1.0 if self.astern else 1.0
-            onward, back = outside(p + sign * look * h), outside(p - sign * look * h)
-            if onward > outside(p) + EDGE_SLANT * look and back < onward:  # heading out, more than along the edge
+
+            def leads_out(astern: bool) -> bool:  # heading out, more than along the edge
+                sign = -1.0 if astern else 1.0
+                onward, back = outside(p + sign * look * h), outside(p - sign * look * h)
+                return onward > outside(p) + EDGE_SLANT * look and back < onward
+
+            if self.edge_leg is not None:  # a leg away from the edge goes on for EDGE_LEG_M (the bow turns on it)
+                start, astern = self.edge_leg
+                if float(np.hypot(*(p - start))) < EDGE_LEG_M and not leads_out(astern):
+                    self.astern = astern
+                else:
+                    self.edge_leg = None
+            if self.edge_leg is None and leads_out(self.astern):
                 self.astern = not self.astern
+                self.edge_leg = (p.copy(), self.astern)
         sign = -1.0 if self.astern else 1.0
         turning = error > TURNING_RAD
         s = sign * min(self.max_speed, self.gain * math.hypot(along, cross))
