@@ -206,11 +206,12 @@ class LineApproach:
             self.astern = self.travel < 0
         if outside is not None:  # reverse before the area's edge, or back into it (unless the other way is worse)
             look = max(EDGE_MIN_M, EDGE_LOOK_S * speed_mps)
+            here = outside(p)
 
             def leads_out(astern: bool) -> bool:  # heading out, more than along the edge
                 sign = -1.0 if astern else 1.0
                 onward, back = outside(p + sign * look * h), outside(p - sign * look * h)
-                return onward > outside(p) + EDGE_SLANT * look and back < onward
+                return onward > here + EDGE_SLANT * look and back < onward
 
             if self.edge_leg is not None:  # a leg away from the edge goes on for EDGE_LEG_M (the bow turns on it)
                 start, astern = self.edge_leg
