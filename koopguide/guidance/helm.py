@@ -63,6 +63,7 @@ class Helm:
         # other boats are heard (fleet): following the field and a boat that needs way go velocity-only, as the
         # separation filter expects; a boat that turns in place keeps its ahead-or-astern maneuver near a point
         self.in_company = False
+        self.arrived = False  # the service has declared arrival (set by the supervisor each command)
 
     def reset(self) -> None:
         """A restarted vehicle (maybe another boat): forget how it turns."""
@@ -271,6 +272,7 @@ class Helm:
             bias_ned=bias_ned,
             outside=self.law.outside_area,
             t=self.t,
+            arrived=self.arrived,
         )
         return self._maneuver(m)
 

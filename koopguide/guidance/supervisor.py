@@ -258,6 +258,7 @@ class Supervisor:
             self.arrived, self.degraded, self.back_reason = True, False, ""
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
             self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s")
+        self.helm.arrived = self.arrived
         error = law.goal_ned - p
         # After a drift-off, within the capture radius: back onto the goal with the station keeping control
         # (honestly reported as guiding), not the approach's speed floor that would overshoot the goal.

@@ -3,11 +3,14 @@
 A rudder boat turns only while it moves, on a circle of radius R (estimation/turning.py): at the arrival
 radius's scale (0.15 m) against R ~ 1.5 m it can neither turn on the spot to face the goal nor make a U-turn
 in the room a tank leaves. What it can do is what a driver does in a narrow street: go ahead and astern in
-turn (the autopilot reverses the rudder astern, docs/rover.md). Three modes, one line:
+turn (the autopilot reverses the rudder astern, docs/rover.md). Four modes, one line:
 
 * far from the line or facing off it, once the boat's turning circle is known: a planned approach, the
   shortest Reeds-Shepp path onto an end of the line (law/approach_path.py), planned again when the boat
   leaves it;
+* within ``CAPTURE_M`` of the goal and not yet holding: a receding-horizon search over ahead/astern
+  manoeuvres with the rudder over (law/capture.py), the last decimetres onto the line (a path tracked in the
+  water on a current that is not the goal's ended off the line there, and LOS feedback shuttled along it);
 * on the line near the goal (``HOLD_*``, left beyond ``LEAVE_*``): feedback; in a current into the current
   only (:meth:`LineApproach._hold_in_current`), in still water ahead or astern along the line. A planned path
   is driven to its end before the hold takes over: its last leg lines the bow up with the line (taken over
@@ -54,6 +57,7 @@ from collections.abc import Callable
 import numpy as np
 
 from koopguide.guidance.law.approach_path import HOLD_ALONG_M, ApproachPath
+from koopguide.guidance.law.capture import CAPTURE_LEAVE_M, CAPTURE_M, ENTRY_CROSS_M, ENTRY_RAD, CaptureSearch
 from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, capped, unit, wrap_pi
 
 MIN_DELTA_M = 0.3  # the smallest LOS look-ahead [m]
@@ -66,6 +70,7 @@ TURNING_RAD = math.radians(20.0)  # a heading error this large is a turn: keep w
 K_TURN_RAD = math.radians(45.0)  # ... and this large a K-turn about the goal
 HOLD_CROSS_M, HOLD_RAD = 0.1, math.radians(25.0)  # on the line near the goal: feedback only (and HOLD_ALONG_M)
 LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.4, math.radians(60.0), 0.8  # ... until beyond these: a planned approach
+UNARRIVED_LEAVE_CROSS_M = 0.15  # ... or, not yet arrived, beyond this across: the capture search (law/capture.py)
 HOLD_WAY_MPS = 0.06  # holding in a current, turning: at least this over ground into it [m/s]
 HOLD_MAX_MPS = 0.1  # ... and never more than this [m/s]
 CREEP_M, CREEP_MPS = 0.12, 0.03  # holding in a current: creep this far upstream (about the goal), this fast at least
@@ -96,6 +101,7 @@ class LineApproach:
         self.pivot: np.ndarray | None = None  # where the K-turn under way began [m]
         self.edge_leg: tuple[np.ndarray, bool] | None = None  # where a reversal at the area's edge began [m], its way
         self.path = ApproachPath(approach_mps, max_speed_mps)  # a planned approach onto the line, while far from it
+        self.capture = CaptureSearch(max_speed_mps)  # manoeuvres onto the line within CAPTURE_M of the goal
         self.holding = False  # on the line near the goal: feedback only (hysteresis on HOLD_* / LEAVE_*)
         self.righting = False  # holding in a current, the bow off the line: way on until it is back (hysteresis)
         self.creeping = False  # ... creeping upstream past the goal (else drifting back onto it)
@@ -104,6 +110,7 @@ class LineApproach:
         self.axis_rad, self.astern, self.in_current, self.travel, self.pivot = None, False, False, None, None
         self.edge_leg = None
         self.path.reset()
+        self.capture.reset()
         self.holding = self.righting = self.creeping = False
 
     def aim(self, p_ned: np.ndarray, goal_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None) -> None:
@@ -135,6 +142,7 @@ class LineApproach:
         bias_ned: np.ndarray | None = None,
         outside: Callable[[np.ndarray], float] | None = None,
         t: float | None = None,
+        arrived: bool = True,
     ) -> Maneuver:
         """Heading and signed speed toward the goal along the line, steering out the cross-track error.
 
@@ -142,7 +150,8 @@ class LineApproach:
         speed through the water along its heading (negative: astern); ``bias_ned``: the station keeper's
         integral term [m/s] (law/station.py), added along the heading; ``outside``: how far points ``(K, 2)``
         lie outside the area the boat may use [m] (0 inside; None: no limit); ``t``: vehicle time [s] (None: no
-        planned approach, feedback only)."""
+        planned approach, feedback only); ``arrived``: the service has declared arrival (until then a hold that
+        sits more than ``UNARRIVED_LEAVE_CROSS_M`` off the line is given up for the capture search)."""
         if self.axis_rad is None:
             raise ValueError("LineApproach.command before aim()")
         p = np.asarray(p_ned, dtype=float)
@@ -151,7 +160,9 @@ class LineApproach:
         planned = (
             None
             if t is None
-            else self._planned(t, p, goal_ned, heading_rad, radius_m, along, cross, outside, current_ned)
+            else self._planned(
+                t, p, goal_ned, heading_rad, radius_m, along, cross, outside, current_ned, water_mps, arrived
+            )
         )
         if planned is not None:
             return self._finish(planned, heading_rad, current_ned, water_mps)
@@ -292,17 +303,26 @@ class LineApproach:
         cross: float,
         outside: Callable[[np.ndarray], float] | None,
         current_ned: np.ndarray | None = None,
+        water_mps: float = 0.0,
+        arrived: bool = True,
     ) -> Maneuver | None:
         """Far from the line or facing off it: the planned approach's command (law/approach_path.py), planned
-        anew when there is none; None on the line near the goal (feedback holds the boat there), or before the
-        boat's turning circle has been measured."""
+        anew when there is none; within ``CAPTURE_M`` of the goal, the capture search's manoeuvre (law/capture.py);
+        None on the line near the goal (feedback holds the boat there), or before the boat's turning circle has
+        been measured."""
         facing = abs(wrap_pi(heading_rad - self.axis_rad))
         if self.holding:  # in still water the boat barely moves while it holds: off by more than it could be at
             # the goal (twice settle_m, the arrival radius), it would stay off
             leave_cross = LEAVE_CROSS_M if self.in_current else 2.0 * self.settle_m
+            if not arrived:  # a hold beside the line, short of arriving, sat there for a minute and more (astern, or
+                # in a gyre's sheared current its cross-track steering does not bring the bow round): capture again
+                leave_cross = min(leave_cross, UNARRIVED_LEAVE_CROSS_M)
             self.holding = abs(cross) <= leave_cross and facing <= LEAVE_RAD and abs(along) <= LEAVE_ALONG_M
         else:
-            near = abs(cross) <= HOLD_CROSS_M and facing <= HOLD_RAD and abs(along) <= HOLD_ALONG_M
+            # the capture search hands over only a bow it has lined up well (taken on at the hold's own bound, 20 deg
+            # off and astern, the hold's righting ran the boat 0.5 m off in a uniform current)
+            cross_in, facing_in = (ENTRY_CROSS_M, ENTRY_RAD) if self.capture.active else (HOLD_CROSS_M, HOLD_RAD)
+            near = abs(cross) <= cross_in and facing <= facing_in and abs(along) <= HOLD_ALONG_M
             if near and self.path.active:  # a planned path is driven to its end first (its last leg lines the bow up)
                 m = self.path.command(t, p, heading_rad, current_ned)
                 if m is not None:
@@ -310,7 +330,15 @@ class LineApproach:
             self.holding = near
         if self.holding or radius_m is None:  # holding; or its turning circle not yet seen: nothing to plan with
             self.path.reset()
+            self.capture.reset()
             return None
+        zone = CAPTURE_LEAVE_M if self.capture.active else CAPTURE_M  # hysteresis: no chatter with the planner
+        if math.hypot(along, cross) <= zone:  # the last decimetres onto the line: a search over manoeuvres
+            self.path.reset()
+            c = current_ned if self.in_current else None
+            goal = np.asarray(goal_ned, dtype=float)
+            return self.capture.command(t, p, goal, heading_rad, water_mps, self.axis_rad, c, radius_m, outside)
+        self.capture.reset()
         if self.path.active and self.in_current and self.path.final_heading is not None:
             off = abs(wrap_pi(self.path.final_heading - self.axis_rad))
             if min(off, math.pi - off) > REPLAN_OFF_LINE_RAD:  # planned before the current was known: not its line

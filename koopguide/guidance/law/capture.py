@@ -1,0 +1,188 @@
+"""Capturing the holding line near the goal: a receding-horizon search over short manoeuvres (pure math).
+
+A boat that needs way to turn (a rudder boat, estimation/turning.py) holds the goal only on its line (through
+the goal along the current, law/line_approach.py): within ``HOLD_CROSS_M`` of it across, facing along it within
+``HOLD_RAD``. Close to the goal, the last few decimetres onto that pose are a parking problem: a turning circle
+of R ~ 1.3 m turns the bow by only 0.1 rad per 0.13 m of way, and a boat 0.25 m beside the line, facing along
+it, needs ahead-and-astern legs with the rudder over to get onto it (as a car parks), while the current sets it
+off meanwhile. Line-of-sight feedback there steers toward the line by a few degrees and shuttles along it
+without closing the offset; a shortest Reeds-Shepp path (law/approach_path.py) is tracked in the water on a
+current that is not the one at the goal, and ends off the line.
+
+So within ``CAPTURE_M`` of the goal the boat's next ``HORIZON`` manoeuvres are chosen by search (a receding
+horizon, as in model-predictive control with motion primitives: Frazzoli, Dahleh & Feron (2005), "Maneuver-based
+motion planning for nonlinear systems with symmetries"): each manoeuvre lasts ``STEP_S``, ahead or astern at
+``speed`` through the water with the rudder hard over either way or amidships, or drifting (speed 0, Rover's
+stop controller); every sequence is simulated on a kinematic model of the boat (a circle of radius R through the
+water, first-order speed lag ``SPEED_LAG_S``) carried by the current estimate, and scored where it ends each
+manoeuvre by how far it is from holding (off the line, off the goal, the bow off the line, way left on) plus how
+far it strays out of the area the boat may use. The first manoeuvre of the best sequence is driven for its
+whole ``STEP_S`` (the boat needs that long to get way on; a search every tick dithers ahead-astern), then the
+search is made again from where the boat is. A boat already out of the area (pressed onto a tank's wall by the
+current) scores every sequence by how far out it ends up, so it comes back in first.
+
+Rover's command for a manoeuvre: heading ``TURN_RAD`` off the heading it began with (the rudder stays hard over
+for its whole length: the boat turns by at most speed x ``STEP_S`` / R, far less) or that heading itself, at
+the speed over ground along the heading that gives ``speed`` through the water (Rover holds the speed over
+ground), astern as a negative speed.
+
+Conventions: positions ``(2,)`` local NED [m], headings [rad] from north, speeds [m/s], vehicle seconds.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from koopguide.guidance.law.maneuver import Maneuver, capped, unit, wrap_pi
+
+CAPTURE_M = 0.5  # within this distance of the goal, a boat not yet holding its line is steered by this search [m]
+CAPTURE_LEAVE_M = 0.7  # ... until beyond this (hysteresis: at one radius it went search, planner, search) [m]
+STEP_S = 2.0  # one manoeuvre [s]
+HORIZON = 4  # manoeuvres searched ahead
+SIM_DT_S = 0.1  # the model's time step [s]
+SPEED_LAG_S = 1.0  # the speed through the water follows its command with this time constant [s]
+TURN_RAD = math.radians(45.0)  # a turning manoeuvre asks for this much off its starting heading (rudder hard over)
+SPEED_MPS = 0.12  # through the water on a manoeuvre (at least WATER_MARGIN_MPS faster than the current) [m/s]
+WATER_MARGIN_MPS = 0.04
+MIN_RADIUS_M, MAX_RADIUS_M = 1.0, 2.5  # the turning radius the model uses, clamped [m]
+ENTRY_CROSS_M = 0.1  # the hold takes the boat on from the search this close to the line (across) [m]
+ENTRY_RAD = math.radians(10.0)  # ... facing along it this well: the hold's own entry is 25 deg, and from 20 deg off
+# it keeps way on to right the bow, which carried a boat handed over 20 deg off 0.5 m from the goal (uniform current)
+CROSS_SCALE_M = ENTRY_CROSS_M  # the scales of the score
+ALONG_SCALE_M = 0.15  # the arrival radius [m]
+HEADING_SCALE_RAD = ENTRY_RAD
+WAY_SCALE_MPS = 0.2  # ground speed left at the end of a manoeuvre
+ASTERN_END_COST = 2.0  # holding with the bow downstream (astern into the current) is the rudder's weakest
+CONTINUE_S = 3.0  # the straight run ahead or astern that scores each sequence's end beyond the horizon [s]
+LATER_COST = 0.3  # a pose reached one manoeuvre later scores this much worse
+AREA_COST_PER_M = 200.0  # each metre out of the area the boat may use
+# (direction through the water: +1 ahead, -1 astern, 0 drift; rudder: -1 to port, 0 amidships, +1 to starboard)
+MANEUVERS: tuple[tuple[int, int], ...] = (*itertools.product((1, -1), (-1, 0, 1)), (0, 0))
+
+
+class CaptureSearch:
+    """Call :meth:`command` each tick while capturing; :meth:`reset` when the boat holds or leaves the zone."""
+
+    def __init__(self, max_speed_mps: float) -> None:
+        self.max_speed = max_speed_mps
+        self.chosen: tuple[int, int] | None = None  # the manoeuvre under way
+        self.heading0 = 0.0  # the heading it began with [rad]
+        self.until: float | None = None  # vehicle time it ends [s]
+        seqs = np.array(list(itertools.product(range(len(MANEUVERS)), repeat=HORIZON)))  # (S, HORIZON)
+        table = np.array(MANEUVERS, dtype=float)
+        self._direction = table[seqs, 0]  # (S, HORIZON)
+        self._rudder = table[seqs, 1]
+        self._first = seqs[:, 0]
+
+    def reset(self) -> None:
+        self.chosen, self.until = None, None
+
+    @property
+    def active(self) -> bool:
+        """A manoeuvre has been chosen since the last :meth:`reset`."""
+        return self.chosen is not None
+
+    def command(
+        self,
+        t: float,
+        p_ned: np.ndarray,
+        goal_ned: np.ndarray,
+        heading_rad: float,
+        water_mps: float,
+        axis_rad: float,
+        current_ned: np.ndarray | None,
+        radius_m: float,
+        outside: Callable[[np.ndarray], np.ndarray] | None,
+    ) -> Maneuver:
+        """The manoeuvre under way, or (when it has run its ``STEP_S``) the first of the best sequence from here.
+
+        ``water_mps``: the boat's speed through the water along its heading (negative: astern); ``axis_rad``: the
+        line's bow direction (upstream in a current); ``current_ned``: the estimate, or None in still water;
+        ``outside``: how far points ``(K, 2)`` lie outside the area the boat may use [m] (None: no limit)."""
+        c = np.zeros(2) if current_ned is None else np.asarray(current_ned, dtype=float)
+        if self.until is None or t >= self.until or self.chosen is None:
+            self.chosen = MANEUVERS[self.best(p_ned, goal_ned, heading_rad, water_mps, axis_rad, c, radius_m, outside)]
+            self.heading0, self.until = heading_rad, t + STEP_S
+        direction, rudder = self.chosen
+        heading = wrap_pi(self.heading0 + rudder * TURN_RAD)
+        if direction == 0:
+            return Maneuver(self.heading0, 0.0, False)
+        speed = self.speed(c)
+        over_ground = direction * speed + float(c @ unit(heading))  # Rover holds the speed over ground
+        return Maneuver(heading, capped(over_ground, self.max_speed), direction < 0)
+
+    @staticmethod
+    def speed(c: np.ndarray) -> float:
+        """The speed through the water of a manoeuvre: enough over the current for the rudder to read the way."""
+        return max(SPEED_MPS, float(np.hypot(*c)) + WATER_MARGIN_MPS)
+
+    def best(
+        self,
+        p_ned: np.ndarray,
+        goal_ned: np.ndarray,
+        heading_rad: float,
+        water_mps: float,
+        axis_rad: float,
+        c: np.ndarray,
+        radius_m: float,
+        outside: Callable[[np.ndarray], np.ndarray] | None,
+    ) -> int:
+        """Index into ``MANEUVERS`` of the first manoeuvre of the best-scoring sequence (``c``: the current, zeros
+        in still water)."""
+        n_seq = len(self._first)
+        radius = min(MAX_RADIUS_M, max(MIN_RADIUS_M, radius_m))
+        speed = self.speed(c)
+        p0 = np.asarray(p_ned, dtype=float)
+        pos = np.tile(p0 - np.asarray(goal_ned, dtype=float), (n_seq, 1))  # (S, 2) from the goal [m]
+        psi = np.full(n_seq, heading_rad)
+        u = np.full(n_seq, water_mps)  # through the water along the heading [m/s]
+        a = unit(axis_rad)
+        normal = np.array([-a[1], a[0]])
+        upstream = math.atan2(-c[1], -c[0]) if float(np.hypot(*c)) > 0.0 else None
+        score = np.full(n_seq, np.inf)
+        strayed = np.zeros(n_seq)  # the farthest out of the area at a manoeuvre's end [m]
+
+        def drive(pos, psi, u, target, rudder, seconds):  # the model over ``seconds``: Euler steps of SIM_DT_S
+            for _ in range(round(seconds / SIM_DT_S)):
+                u = u + (target - u) * (SIM_DT_S / SPEED_LAG_S)
+                psi = psi + rudder * np.abs(u) / radius * SIM_DT_S  # Rover turns toward the asked heading
+                pos = pos + (u[:, None] * np.stack([np.cos(psi), np.sin(psi)], axis=1) + c) * SIM_DT_S
+            return pos, psi, u
+
+        def pose_cost(pos, psi, u, k):  # how far from holding, a pose reached after k + 1 manoeuvres
+            off_axis = _abs_wrapped(psi - axis_rad)
+            ground = u[:, None] * np.stack([np.cos(psi), np.sin(psi)], axis=1) + c
+            cost = (
+                (pos @ normal / CROSS_SCALE_M) ** 2
+                + (pos @ a / ALONG_SCALE_M) ** 2
+                + (np.minimum(off_axis, math.pi - off_axis) / HEADING_SCALE_RAD) ** 2  # either end of the line
+                + (np.hypot(ground[:, 0], ground[:, 1]) / WAY_SCALE_MPS) ** 2
+                + LATER_COST * k
+            )
+            if upstream is not None:  # the bow downstream
+                cost = cost + ASTERN_END_COST * (_abs_wrapped(psi - upstream) > math.pi / 2)
+            return cost
+
+        for k in range(HORIZON):
+            pos, psi, u = drive(pos, psi, u, self._direction[:, k] * speed, self._rudder[:, k], STEP_S)
+            if outside is not None:
+                strayed = np.maximum(strayed, np.asarray(outside(pos + goal_ned), dtype=float))
+            score = np.minimum(score, pose_cost(pos, psi, u, k))  # the best pose along the sequence
+        # beyond the horizon: each sequence's end carried on straight ahead or astern for CONTINUE_S, then stopped,
+        # credits a pose aimed at the line (a boat 0.2 m beside its line otherwise found no sequence of four that
+        # got there, and drifted beside it for a minute: every turn toward the line scored worse than none)
+        for direction in (1.0, -1.0):
+            on = drive(pos, psi, u, np.full(n_seq, direction * speed), np.zeros(n_seq), CONTINUE_S)
+            on = drive(*on, np.zeros(n_seq), np.zeros(n_seq), STEP_S)
+            score = np.minimum(score, pose_cost(*on, HORIZON + 1))
+        total = score + AREA_COST_PER_M * strayed  # out of the area already: back in first
+        return int(self._first[int(np.argmin(total))])
+
+
+def _abs_wrapped(angle: np.ndarray) -> np.ndarray:
+    """|angle| wrapped into [0, pi] [rad]."""
+    return np.abs((angle + math.pi) % (2.0 * math.pi) - math.pi)
