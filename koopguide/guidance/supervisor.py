@@ -260,8 +260,7 @@ class Supervisor:
             self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s")
         self.helm.arrived = self.arrived
         error = law.goal_ned - p
-        # After a drift-off, within the capture radius: back onto the goal with the station keeping control
-        # (honestly reported as guiding), not the approach's speed floor that would overshoot the goal.
+        # drifted off, within the capture radius: station keeping (reported as guiding), not the approach's speed floor
         drifted_near = bool(self.back_reason) and distance <= arrival.capture_radius_m and not self.degraded
         state = S.GUIDING
         if self.arrived or drifted_near:
