@@ -66,6 +66,14 @@ def test_stream_rate_requests_change_rates_on_the_link(gcs_and_sim):
     gcs.run_for(2.0, lambda m: stamps.append(m.time_boot_ms) if m.get_type() == "LOCAL_POSITION_NED" else None)
     assert 35 <= len(stamps) <= 45  # 20 Hz for 2 s simulated
     gcs.mav.request_data_stream_send(1, 1, mavlink.MAV_DATA_STREAM_EXTRA1, 10, 1)
+    # the request has no ack: count from the first two ATTITUDE messages at the new rate (under load, some sent at
+    # the old 1 Hz before the simulator read the request were still on their way, and 16 came in the 2 s)
+    seen = [gcs.wait_type("ATTITUDE").time_boot_ms]
+    for _ in range(5):
+        seen.append(gcs.wait_type("ATTITUDE").time_boot_ms)
+        if seen[-1] - seen[-2] <= 150:
+            break
+    assert seen[-1] - seen[-2] <= 150, f"ATTITUDE still every {seen[-1] - seen[-2]} ms after asking for 10 Hz"
     count = []
     gcs.run_for(2.0, lambda m: count.append(1) if m.get_type() == "ATTITUDE" else None)
     assert 17 <= len(count) <= 23
