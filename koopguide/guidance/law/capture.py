@@ -146,25 +146,28 @@ class CaptureSearch:
         score = np.full(n_seq, np.inf)
         strayed = np.zeros(n_seq)  # the farthest out of the area at a manoeuvre's end [m]
 
+        def ground(psi, u):  # the velocity over ground (S, 2) of way u along headings psi, carried by the current
+            return u[:, None] * np.stack([np.cos(psi), np.sin(psi)], axis=1) + c
+
         def drive(pos, psi, u, target, rudder, seconds):  # the model over ``seconds``: Euler steps of SIM_DT_S
             for _ in range(round(seconds / SIM_DT_S)):
                 u = u + (target - u) * (SIM_DT_S / SPEED_LAG_S)
                 psi = psi + rudder * np.abs(u) / radius * SIM_DT_S  # Rover turns toward the asked heading
-                pos = pos + (u[:, None] * np.stack([np.cos(psi), np.sin(psi)], axis=1) + c) * SIM_DT_S
+                pos = pos + ground(psi, u) * SIM_DT_S
             return pos, psi, u
 
         def pose_cost(pos, psi, u, k):  # how far from holding, a pose reached after k + 1 manoeuvres
-            off_axis = _abs_wrapped(psi - axis_rad)
-            ground = u[:, None] * np.stack([np.cos(psi), np.sin(psi)], axis=1) + c
+            off_axis = np.abs(wrap_pi(psi - axis_rad))
+            way = ground(psi, u)
             cost = (
                 (pos @ normal / CROSS_SCALE_M) ** 2
                 + (pos @ a / ALONG_SCALE_M) ** 2
                 + (np.minimum(off_axis, math.pi - off_axis) / HEADING_SCALE_RAD) ** 2  # either end of the line
-                + (np.hypot(ground[:, 0], ground[:, 1]) / WAY_SCALE_MPS) ** 2
+                + (np.hypot(way[:, 0], way[:, 1]) / WAY_SCALE_MPS) ** 2
                 + LATER_COST * k
             )
             if upstream is not None:  # the bow downstream
-                cost = cost + ASTERN_END_COST * (_abs_wrapped(psi - upstream) > math.pi / 2)
+                cost = cost + ASTERN_END_COST * (np.abs(wrap_pi(psi - upstream)) > math.pi / 2)
             return cost
 
         for k in range(HORIZON):
@@ -181,8 +184,3 @@ class CaptureSearch:
             score = np.minimum(score, pose_cost(*on, HORIZON + 1))
         total = score + AREA_COST_PER_M * strayed  # out of the area already: back in first
         return int(self._first[int(np.argmin(total))])
-
-
-def _abs_wrapped(angle: np.ndarray) -> np.ndarray:
-    """|angle| wrapped into [0, pi] [rad]."""
-    return np.abs((angle + math.pi) % (2.0 * math.pi) - math.pi)

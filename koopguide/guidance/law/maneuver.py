@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
@@ -41,8 +42,11 @@ CIRCLE_MARGIN = 0.7  # fraction of the geometric speed cap used (the turn rate i
 MIN_SPEED_MPS = CRAB_MIN_SPEED_MPS
 
 
-def wrap_pi(angle: float) -> float:
-    """``angle`` [rad] wrapped into [-pi, pi)."""
+Angle = TypeVar("Angle", float, np.ndarray)
+
+
+def wrap_pi(angle: Angle) -> Angle:
+    """``angle`` [rad] wrapped into [-pi, pi) (a float, or an array element-wise)."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
