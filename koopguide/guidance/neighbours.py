@@ -17,6 +17,7 @@ import numpy as np
 
 from koopguide.guidance import events as ev
 from koopguide.guidance.law import separation
+from koopguide.guidance.law.maneuver import wrap_pi
 from koopguide.guidance.settings import FleetSettings
 
 # The barrier's distance is min_separation_m plus an allowance for what the boat does before it follows a new
@@ -182,17 +183,13 @@ def sweep_facing(heading_rad: float, turn_to_rad: float | None, bearing_rad: flo
     """The largest cos(bow - bearing), clipped at 0, over the bow's turn from ``heading_rad`` the short way to
     ``turn_to_rad`` (as Rover turns to a new heading): 1 when the bow sweeps past the neighbour's bearing.
     A turn on the spot creeps along the bow, so this is how much of the creep is toward the neighbour."""
-    off = _wrap(bearing_rad - heading_rad)
+    off = wrap_pi(bearing_rad - heading_rad)
     if turn_to_rad is None:
         return max(math.cos(off), 0.0)
-    turn = _wrap(turn_to_rad - heading_rad)
+    turn = wrap_pi(turn_to_rad - heading_rad)
     if (0.0 <= off <= turn) or (turn <= off <= 0.0):
         return 1.0
     return max(math.cos(off), math.cos(off - turn), 0.0)
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def neighbour_event(
