@@ -154,6 +154,7 @@ class EstimatorSettings:
     max_dt_s: Seconds
     current_prior_std_mps: Annotated[float, Range(0.0, 20.0, lo_open=True)]
     current_walk_mps_per_sqrt_s: Annotated[float, Range(0.0, 10.0)]
+    current_shear_mps_per_sqrt_m: Annotated[float, Range(0.0, 10.0)]  # the current's change along the route
     current_max_turn_dps: Annotated[float, Range(0.0, 360.0, lo_open=True)]
 
 

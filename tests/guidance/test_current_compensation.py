@@ -7,6 +7,7 @@ sets it sideways. Conventions: NED [m, m/s], headings [rad] from north.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -55,8 +56,17 @@ def test_crab_at_rest_faces_straight_upstream_and_slower_than_the_current_ferry_
     assert math.cos(heading_of(setpoint)) < 0  # facing into the current
 
 
-def test_the_estimator_learns_a_current_from_sideways_slip_on_changing_headings():
-    est = CurrentEstimator(settings.load().estimator)
+SHEARED = 0.04  # current_shear_mps_per_sqrt_m for a vortex's or a gyre's water [m/s/sqrt(m)]
+
+
+def with_shear(shear: float) -> settings.EstimatorSettings:
+    """The default estimator with ``current_shear_mps_per_sqrt_m`` set (0: the current is uniform along the route)."""
+    return dataclasses.replace(settings.load().estimator, current_shear_mps_per_sqrt_m=shear)
+
+
+@pytest.mark.parametrize("shear", [0.0, SHEARED])
+def test_the_estimator_learns_a_current_from_sideways_slip_on_changing_headings(shear):
+    est = CurrentEstimator(with_shear(shear))
     truth = np.array([0.03, -0.01])
     rng = np.random.default_rng(1)
     t = 0.0
@@ -66,19 +76,52 @@ def test_the_estimator_learns_a_current_from_sideways_slip_on_changing_headings(
         ground = 0.2 * np.array([math.cos(psi), math.sin(psi)]) + truth + rng.normal(0, 0.01, 2)
         est.update(t, ground, psi, math.radians(3.0))
     np.testing.assert_allclose(est.current_ned, truth, atol=0.004)
-    assert est.std_mps < 0.01
+    if shear == 0.0:
+        assert est.std_mps < 0.01
+    else:  # 6 m covered: the component along the heading, last seen 3 m back, may have changed since
+        assert est.std_mps > 0.03
     assert not est.update(t + 0.05, np.array([0.5, 0.5]), 0.0, math.radians(20.0))  # turning hard: skipped
     assert not est.update(t + 0.1, np.array([np.nan, 0.0]), 0.0, 0.0)  # not finite: skipped
     np.testing.assert_allclose(est.current_ned, truth, atol=0.004)
 
 
-def test_one_heading_shows_only_the_cross_component_and_the_other_keeps_its_prior():
-    est = CurrentEstimator(settings.load().estimator)
+@pytest.mark.parametrize("shear", [0.0, SHEARED])
+def test_one_heading_shows_only_the_cross_component_and_the_other_keeps_its_prior(shear):
+    cfg = with_shear(shear)
+    est = CurrentEstimator(cfg)
     for k in range(200):  # heading north, current toward the east: all of it is across
         est.update(k * 0.05, np.array([0.2, 0.04]), 0.0, 0.0)
     assert est.current_ned[1] == pytest.approx(0.04, abs=0.003)
     assert est.current_ned[0] == pytest.approx(0.0, abs=1e-9)  # along the heading: never observed
-    assert est.std_mps == pytest.approx(settings.load().estimator.current_prior_std_mps, rel=0.05)
+    # its spread: the prior's, grown over the 9.95 s and the 2.03 m covered
+    seconds, metres = 199 * 0.05, 199 * 0.05 * math.hypot(0.2, 0.04)
+    spread = cfg.current_prior_std_mps**2 + cfg.current_walk_mps_per_sqrt_s**2 * seconds
+    spread += cfg.current_shear_mps_per_sqrt_m**2 * metres
+    assert est.std_mps == pytest.approx(math.sqrt(spread), rel=0.02)
+
+
+def fly_through_a_shear(est: CurrentEstimator) -> float:
+    """North then east through water flowing toward the north, 2 m on east into water flowing toward the
+    north-west (a vortex's shear), then north again: the east component's error [m/s] 1 s after that turn."""
+    t, legs = (
+        0.0,
+        [(0.0, (0.03, 0.0), 5.0), (90.0, (0.03, 0.0), 5.0), (90.0, (-0.03, 0.03), 10.0), (0.0, (-0.03, 0.03), 1.0)],
+    )
+    for heading_deg, current, seconds in legs:
+        psi, c = math.radians(heading_deg), np.array(current)
+        for _ in range(int(seconds / 0.05)):
+            t += 0.05
+            est.update(t, 0.2 * np.array([math.cos(psi), math.sin(psi)]) + c, psi, 0.0)
+    return abs(float(est.current_ned[1]) - 0.03)
+
+
+def test_the_current_along_a_long_leg_is_relearnt_at_the_next_turn():
+    """On the 2 m leg east the east component of the new water is never seen (it lies along the heading); once
+    the boat turns north it is. With its spread grown by the distance covered (``current_shear_mps_per_sqrt_m``)
+    the estimate takes it on at once; told the water is uniform (0, the default), it holds on to the east
+    component seen 2 m back (in a vortex that put the hold's line across the true current, 0.04-0.05 m/s off)."""
+    assert fly_through_a_shear(CurrentEstimator(with_shear(SHEARED))) < 0.003
+    assert fly_through_a_shear(CurrentEstimator(with_shear(0.0))) > 0.015
 
 
 def test_the_approach_slows_a_boat_crossing_the_current_so_it_arrives_facing_into_it(zshape_model):

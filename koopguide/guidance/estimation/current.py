@@ -10,8 +10,15 @@ observable. The component along the heading cannot be told from the boat's own s
 and does not need to be: the autopilot holds the speed over ground along the heading (see
 :func:`koopguide.guidance.law.command.crab`).
 
-Model: state ``c = (c_N, c_E)`` [m/s], a random walk (a current changes slowly along the route);
-prior ``c = 0`` with ``current_prior_std_mps``; measurement ``z = v_ground . n(psi)`` with ``H = n(psi)^T``
+Model: state ``c = (c_N, c_E)`` [m/s], a random walk in time and in space: over ``dt`` seconds in which the
+boat covers ``|v_ground| dt`` metres the covariance grows by ``(walk^2 dt + shear^2 |v_ground| dt) I``
+(``current_walk_mps_per_sqrt_s``, ``current_shear_mps_per_sqrt_m``). With time alone, the component along a
+long straight leg (never observed on it) keeps the value seen a metre or two back: in a vortex, 0.04-0.05 m/s
+off at the goal. Growing with the distance covered, that component's spread lets the next headings' slip
+correct it (shear 0.04: the error at the goal in a vortex 0.015-0.024 m/s RMS against 0.020-0.051 m/s), but
+the spread a moving boat then carries keeps a rudder boat off the current's line in a uniform current (its
+hold needs the estimate clear of twice its spread; docs/guidance.md, "Where it fails"), so the default is 0.
+Prior ``c = 0`` with ``current_prior_std_mps``; measurement ``z = v_ground . n(psi)`` with ``H = n(psi)^T``
 and the fix's velocity noise. Measurements while the boat turns faster than ``current_max_turn_dps`` are
 skipped: in a turn the hull does slip sideways through the water, which would read as current. A boat that is
 not propelled (disarmed) drifts with the water: then its whole ground velocity measures the current (H = I).
@@ -61,8 +68,11 @@ class CurrentEstimator:
         v_ground = np.asarray(v_ground, dtype=float)
         if not (np.all(np.isfinite(v_ground)) and math.isfinite(heading_rad) and math.isfinite(turn_rate_radps)):
             return False
-        if self.t is not None and t > self.t:  # random walk over the time since the last measurement
-            q = self.settings.current_walk_mps_per_sqrt_s**2 * min(t - self.t, self.settings.max_dt_s)
+        if self.t is not None and t > self.t:  # random walk over the time since the last measurement and the way
+            dt = min(t - self.t, self.settings.max_dt_s)
+            metres = float(np.hypot(*v_ground)) * dt
+            s = self.settings
+            q = s.current_walk_mps_per_sqrt_s**2 * dt + s.current_shear_mps_per_sqrt_m**2 * metres
             self.kf.P = self.kf.P + np.eye(2) * q
         if self.t is None or t > self.t:
             self.t = t
