@@ -103,11 +103,9 @@ def test_one_heading_shows_only_the_cross_component_and_the_other_keeps_its_prio
 def fly_through_a_shear(est: CurrentEstimator) -> float:
     """North then east through water flowing toward the north, 2 m on east into water flowing toward the
     north-west (a vortex's shear), then north again: the east component's error [m/s] 1 s after that turn."""
-    t, legs = (
-        0.0,
-        [(0.0, (0.03, 0.0), 5.0), (90.0, (0.03, 0.0), 5.0), (90.0, (-0.03, 0.03), 10.0), (0.0, (-0.03, 0.03), 1.0)],
-    )
-    for heading_deg, current, seconds in legs:
+    legs = [(0.0, (0.03, 0.0), 5.0), (90.0, (0.03, 0.0), 5.0), (90.0, (-0.03, 0.03), 10.0), (0.0, (-0.03, 0.03), 1.0)]
+    t = 0.0
+    for heading_deg, current, seconds in legs:  # (heading [deg], current (N, E) [m/s], duration [s])
         psi, c = math.radians(heading_deg), np.array(current)
         for _ in range(int(seconds / 0.05)):
             t += 0.05
