@@ -32,6 +32,7 @@ from koopguide.base.flags import name_list
 
 VEHICLES: tuple[str, ...] = ("diff_thrust", "rudder", "vectored")
 CURRENT_MPS = 0.03
+PORT_ATTEMPTS = 3  # a run whose MAVLink port another process took first is set up again on a new one
 
 
 def _uniform(direction_deg: float) -> dict[str, Any]:
@@ -148,20 +149,30 @@ def run_one(spec: RunSpec) -> RunResult:
     import logging
 
     from koopguide.harness.mission import fly_paced, mission_at
+    from koopguide.mavlink.endpoint import PortInUseError
 
     logging.basicConfig(level=logging.ERROR)  # the service's state changes are in the results, not on stderr
 
     sim_extra = {**SENSORS, "vehicle": spec.vehicle}
-    cfg, sim_cfg, pose = mission_at(
-        Path(spec.model),
-        np.array(spec.start_model),
-        spec.speedup,
-        FLOWS[spec.flow],
-        vehicle_id=f"c{spec.start_index}",
-        seed=spec.seed,
-        sim_extra=sim_extra,
-    )
-    result = asyncio.run(fly_paced(cfg, Path(spec.model), sim_cfg, spec.timeout_s, settle_s=spec.hold_s))
+    for attempt in range(1, PORT_ATTEMPTS + 1):
+        cfg, sim_cfg, pose = mission_at(
+            Path(spec.model),
+            np.array(spec.start_model),
+            spec.speedup,
+            FLOWS[spec.flow],
+            vehicle_id=f"c{spec.start_index}",
+            seed=spec.seed,
+            sim_extra=sim_extra,
+        )
+        try:
+            result = asyncio.run(fly_paced(cfg, Path(spec.model), sim_cfg, spec.timeout_s, settle_s=spec.hold_s))
+            break
+        except PortInUseError as exc:
+            # the free port mission_at picked was bound by another process (a parallel worker) before the service
+            # could bind it: nothing was flown, so pick another
+            if attempt == PORT_ATTEMPTS:
+                raise
+            print(f"mission: {exc}; flying it on another port", file=sys.stderr)
     law, goal = result.law, result.law.goal_ned
     track = result.track
     line = streamline(law.field_velocity_ned, np.array(pose[:2]), goal, cfg.arrival.radius_m)

@@ -29,6 +29,10 @@ class EndpointError(ValueError):
     """A MAVLink endpoint string that is malformed or cannot be opened; the message names it."""
 
 
+class PortInUseError(EndpointError):
+    """The endpoint's port is bound by another process (only one may own it)."""
+
+
 @dataclass(frozen=True)
 class Endpoint:
     kind: str  # one of udpin, udpout, tcpin, tcp, serial ("udp" is normalised to "udpin")

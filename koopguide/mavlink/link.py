@@ -28,7 +28,7 @@ from collections.abc import Callable, Hashable
 from typing import Any
 
 from koopguide.mavlink.datagram import MAX_DATAGRAM_BYTES, MAX_DATAGRAMS_PER_WAKE, open_udp
-from koopguide.mavlink.endpoint import SERIAL, TCP_IN, TCP_OUT, UDP_IN, UDP_OUT, Endpoint, EndpointError
+from koopguide.mavlink.endpoint import SERIAL, TCP_IN, TCP_OUT, UDP_IN, UDP_OUT, Endpoint, EndpointError, PortInUseError
 from koopguide.mavlink.intake import Intake, LinkStats
 from koopguide.mavlink.link_settings import LinkSettings
 from koopguide.mavlink.rover import is_autopilot_heartbeat
@@ -86,7 +86,8 @@ class Link:
             await link._open()
         except OSError as exc:
             if not (link.endpoint.stream and settings.retry_first_open):
-                raise EndpointError(_open_error(link.endpoint, exc)) from None
+                error = PortInUseError if exc.errno == errno.EADDRINUSE else EndpointError
+                raise error(_open_error(link.endpoint, exc)) from None
             log.warning("MAVLink %s: cannot open (%s); retrying", link.endpoint, exc.strerror or exc)
             link._schedule_reopen()
         return link

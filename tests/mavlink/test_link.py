@@ -13,7 +13,7 @@ import pytest
 from pymavlink import mavutil
 
 from koopguide.mavlink import rover
-from koopguide.mavlink.endpoint import Endpoint, EndpointError
+from koopguide.mavlink.endpoint import Endpoint, EndpointError, PortInUseError
 from koopguide.mavlink.link import Link
 from koopguide.mavlink.link_settings import LinkSettings
 from koopguide.mavlink.signing import SigningKey
@@ -232,8 +232,9 @@ def test_the_port_is_exclusive() -> None:
         link = await service_link(Received())
         port = link.local_address[1]
         try:
-            with pytest.raises(EndpointError, match=f"port {port} is already in use by another process"):
+            with pytest.raises(PortInUseError, match=f"port {port} is already in use by another process") as taken:
                 await Link.create(LinkSettings(Endpoint.parse(f"udpin:127.0.0.1:{port}"), (SERVICE,)), Received())
+            assert isinstance(taken.value, EndpointError)  # the CLI's one-line error for an endpoint it cannot open
             with pytest.raises(OSError):  # pymavlink's own udpin (SO_REUSEADDR) cannot share it either
                 mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}")
         finally:
