@@ -155,6 +155,7 @@ class EstimatorSettings:
     current_prior_std_mps: Annotated[float, Range(0.0, 20.0, lo_open=True)]
     current_walk_mps_per_sqrt_s: Annotated[float, Range(0.0, 10.0)]
     current_shear_mps_per_sqrt_m: Annotated[float, Range(0.0, 10.0)]  # the current's change along the route
+    current_shear_onset_mps: Annotated[float, Range(0.0, 10.0, lo_open=True)]  # ... once the slip shows it
     current_max_turn_dps: Annotated[float, Range(0.0, 360.0, lo_open=True)]
 
 

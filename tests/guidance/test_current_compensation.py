@@ -76,50 +76,82 @@ def test_the_estimator_learns_a_current_from_sideways_slip_on_changing_headings(
         ground = 0.2 * np.array([math.cos(psi), math.sin(psi)]) + truth + rng.normal(0, 0.01, 2)
         est.update(t, ground, psi, math.radians(3.0))
     np.testing.assert_allclose(est.current_ned, truth, atol=0.004)
-    if shear == 0.0:
-        assert est.std_mps < 0.01
-    else:  # 6 m covered: the component along the heading, last seen 3 m back, may have changed since
-        assert est.std_mps > 0.03
+    assert est.seen_std_mps < 0.01  # seen from a half turn of headings
     assert not est.update(t + 0.05, np.array([0.5, 0.5]), 0.0, math.radians(20.0))  # turning hard: skipped
     assert not est.update(t + 0.1, np.array([np.nan, 0.0]), 0.0, 0.0)  # not finite: skipped
     np.testing.assert_allclose(est.current_ned, truth, atol=0.004)
 
 
 @pytest.mark.parametrize("shear", [0.0, SHEARED])
-def test_one_heading_shows_only_the_cross_component_and_the_other_keeps_its_prior(shear):
+def test_one_heading_in_uniform_water_shows_only_the_cross_component_and_the_other_keeps_its_prior(shear):
     cfg = with_shear(shear)
     est = CurrentEstimator(cfg)
-    for k in range(200):  # heading north, current toward the east: all of it is across
-        est.update(k * 0.05, np.array([0.2, 0.04]), 0.0, 0.0)
+    rng = np.random.default_rng(2)
+    for k in range(400):  # heading north, current toward the east: all of it is across
+        est.update(k * 0.05, np.array([0.2, 0.04]) + rng.normal(0, 0.004, 2), 0.0, 0.0)
     assert est.current_ned[1] == pytest.approx(0.04, abs=0.003)
-    assert est.current_ned[0] == pytest.approx(0.0, abs=1e-9)  # along the heading: never observed
-    # its spread: the prior's, grown over the 9.95 s and the 2.03 m covered
-    seconds, metres = 199 * 0.05, 199 * 0.05 * math.hypot(0.2, 0.04)
-    spread = cfg.current_prior_std_mps**2 + cfg.current_walk_mps_per_sqrt_s**2 * seconds
-    spread += cfg.current_shear_mps_per_sqrt_m**2 * metres
-    assert est.std_mps == pytest.approx(math.sqrt(spread), rel=0.02)
+    assert est.current_ned[0] == pytest.approx(0.0, abs=0.002)  # along the heading: never observed
+    # its spread: the prior's, grown over the 19.95 s by the walk in time; the slip's innovations are the fix's
+    # noise only (uniform water), so the shear's walk in space stays off
+    spread = cfg.current_prior_std_mps**2 + cfg.current_walk_mps_per_sqrt_s**2 * 399 * 0.05
+    assert est.seen_std_mps == pytest.approx(math.sqrt(spread), rel=0.02)
+    assert est.std_mps == pytest.approx(est.seen_std_mps, rel=0.02)
+    assert est.shear_weight == 0.0
+
+
+def test_the_shears_walk_follows_the_slips_innovations():
+    """None while the innovations' RMS stays below ``current_shear_onset_mps``, all of it from twice that; the
+    spread then grows by ``shear^2`` per metre covered."""
+    cfg = with_shear(SHEARED)
+    est = CurrentEstimator(cfg)
+    onset = cfg.current_shear_onset_mps
+    for rms, weight in [(0.0, 0.0), (0.9 * onset, 0.0), (1.5 * onset, 0.5), (2.0 * onset, 1.0), (5.0 * onset, 1.0)]:
+        est.slip_ms = rms**2
+        assert est.shear_weight == pytest.approx(weight)
+    est.update(0.0, np.array([0.2, 0.0]), 0.0, 0.0)
+    before, seen = est.kf.P.copy(), est.P_seen.copy()
+    est.slip_ms = (3.0 * onset) ** 2
+    est.update(0.5, np.array([0.0, 0.0]), 0.0, math.radians(90.0))  # turning hard: the walk only, no update
+    np.testing.assert_allclose(est.P_seen - seen, np.eye(2) * cfg.current_walk_mps_per_sqrt_s**2 * 0.5)
+    np.testing.assert_allclose(est.kf.P - before, est.P_seen - seen)  # stood still: no metres covered
+    before, seen = est.kf.P.copy(), est.P_seen.copy()
+    est.update(1.0, np.array([0.2, 0.0]), 0.0, math.radians(90.0))  # 0.1 m covered
+    grown = (est.kf.P - before) - (est.P_seen - seen)
+    np.testing.assert_allclose(grown, np.eye(2) * SHEARED**2 * 0.1)
 
 
 def fly_through_a_shear(est: CurrentEstimator) -> float:
-    """North then east through water flowing toward the north, 2 m on east into water flowing toward the
-    north-west (a vortex's shear), then north again: the east component's error [m/s] 1 s after that turn."""
-    legs = [(0.0, (0.03, 0.0), 5.0), (90.0, (0.03, 0.0), 5.0), (90.0, (-0.03, 0.03), 10.0), (0.0, (-0.03, 0.03), 1.0)]
+    """North then east through water flowing toward the north, then 2 m on east through a vortex's shear (the
+    current turns from toward the north to toward the north-west along the leg), then north again: the east
+    component's error [m/s] 1 s after that turn."""
     t = 0.0
-    for heading_deg, current, seconds in legs:  # (heading [deg], current (N, E) [m/s], duration [s])
-        psi, c = math.radians(heading_deg), np.array(current)
-        for _ in range(int(seconds / 0.05)):
+
+    def leg(heading_deg: float, seconds: float, current_at) -> None:  # current_at(fraction of the leg) (N, E) [m/s]
+        nonlocal t
+        psi, steps = math.radians(heading_deg), int(seconds / 0.05)
+        for k in range(steps):
             t += 0.05
-            est.update(t, 0.2 * np.array([math.cos(psi), math.sin(psi)]) + c, psi, 0.0)
+            est.update(t, 0.2 * np.array([math.cos(psi), math.sin(psi)]) + current_at(k / steps), psi, 0.0)
+
+    north, north_west = np.array([0.03, 0.0]), np.array([-0.03, 0.03])
+    leg(0.0, 5.0, lambda f: north)
+    leg(90.0, 5.0, lambda f: north)
+    leg(90.0, 10.0, lambda f: (1.0 - f) * north + f * north_west)
+    leg(0.0, 1.0, lambda f: north_west)
     return abs(float(est.current_ned[1]) - 0.03)
 
 
 def test_the_current_along_a_long_leg_is_relearnt_at_the_next_turn():
-    """On the 2 m leg east the east component of the new water is never seen (it lies along the heading); once
-    the boat turns north it is. With its spread grown by the distance covered (``current_shear_mps_per_sqrt_m``)
-    the estimate takes it on at once; told the water is uniform (0, the default), it holds on to the east
-    component seen 2 m back (in a vortex that put the hold's line across the true current, 0.04-0.05 m/s off)."""
-    assert fly_through_a_shear(CurrentEstimator(with_shear(SHEARED))) < 0.003
-    assert fly_through_a_shear(CurrentEstimator(with_shear(0.0))) > 0.015
+    """On the 2 m leg east the east component of the changing water is never seen (it lies along the heading);
+    once the boat turns north it is. The leg's slip keeps changing (the north component turns over), so the shear's
+    walk is on (in part: the innovations' RMS is 0.011-0.013 m/s, just past the onset): the spread of the unseen
+    component grows with the distance covered and the estimate takes most of the new value on within 1 s. Told the
+    water is uniform (shear 0), it holds on to the east component seen 2 m back (in a vortex that put the hold's
+    line across the true current, 0.04-0.05 m/s off)."""
+    sheared = fly_through_a_shear(CurrentEstimator(with_shear(SHEARED)))
+    uniform = fly_through_a_shear(CurrentEstimator(with_shear(0.0)))
+    assert uniform > 0.015
+    assert sheared < 0.35 * uniform
 
 
 def test_the_approach_slows_a_boat_crossing_the_current_so_it_arrives_facing_into_it(zshape_model):

@@ -218,7 +218,8 @@ def test_a_boat_that_needs_way_arrives_only_once_it_holds_its_line(zshape_model:
     bench = Bench(zshape_model, command={"probe_turn_s": 0.0})
     helm, estimator = bench.sup.helm, bench.sup.vehicle.current
     helm.ability.needs_way, helm.ability.radius_m = True, 1.2  # as the turn probe finds a rudder boat
-    estimator.kf.x[:], estimator.kf.P[:] = (0.0, 0.03), np.eye(2) * 1e-6  # the current, known
+    estimator.kf.x[:] = (0.0, 0.03)  # the current, known (seen from every side)
+    estimator.kf.P[:] = estimator.P_seen[:] = np.eye(2) * 1e-6
     estimator.updates = 1
     bench.p, bench.heading = np.array([0.08, 0.0]), 0.0  # 0.08 m north of the goal, facing across the E-W line
     for d in bench.fly(1.0, obey=False, current=(0.0, 0.03)):

@@ -10,14 +10,18 @@ observable. The component along the heading cannot be told from the boat's own s
 and does not need to be: the autopilot holds the speed over ground along the heading (see
 :func:`koopguide.guidance.law.command.crab`).
 
-Model: state ``c = (c_N, c_E)`` [m/s], a random walk in time and in space: over ``dt`` seconds in which the
-boat covers ``|v_ground| dt`` metres the covariance grows by ``(walk^2 dt + shear^2 |v_ground| dt) I``
-(``current_walk_mps_per_sqrt_s``, ``current_shear_mps_per_sqrt_m``). With time alone, the component along a
-long straight leg (never observed on it) keeps the value seen a metre or two back: in a vortex, 0.04-0.05 m/s
-off at the goal. Growing with the distance covered, that component's spread lets the next headings' slip
-correct it (shear 0.04: the error at the goal in a vortex 0.015-0.024 m/s RMS against 0.020-0.051 m/s), but
-the spread a moving boat then carries keeps a rudder boat off the current's line in a uniform current (its
-hold needs the estimate clear of twice its spread; docs/guidance.md, "Where it fails"), so the default is 0.
+Model: state ``c = (c_N, c_E)`` [m/s], a random walk in time and, where the water shows shear, in space: over
+``dt`` seconds in which the boat covers ``|v_ground| dt`` metres the covariance grows by
+``(walk^2 dt + w shear^2 |v_ground| dt) I`` (``current_walk_mps_per_sqrt_s``, ``current_shear_mps_per_sqrt_m``).
+With time alone, the component along a long straight leg (never observed on it) keeps the value seen a metre or
+two back: in a vortex, 0.04-0.05 m/s off at the goal; grown with the distance covered, the next headings' slip
+corrects it. In uniform water that growth only lets the hull's own sideways slip (after a turn) leak into the
+unobserved component, so it applies in proportion ``w`` (0..1) to how far the slip's innovations exceed what
+uniform water gives: none below ``current_shear_onset_mps`` RMS (over ``SLIP_WINDOW_S``), all of it from twice
+that; an innovation-based adaptive filter (Mehra (1970), "On the identification of variances and adaptive Kalman
+filtering", IEEE TAC 15(2); Mohamed & Schwarz (1999), J. Geodesy 73). ``P_seen`` is the covariance of the same
+measurements with the walk in time only: how well the headings flown pin the current down, which decides whether
+the hold may follow the current's line (docs/guidance.md, "Where it fails").
 Prior ``c = 0`` with ``current_prior_std_mps``; measurement ``z = v_ground . n(psi)`` with ``H = n(psi)^T``
 and the fix's velocity noise. Measurements while the boat turns faster than ``current_max_turn_dps`` are
 skipped: in a turn the hull does slip sideways through the water, which would read as current. A boat that is
@@ -32,8 +36,11 @@ import math
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
+from filterpy.kalman import update as kalman_update
 
 from koopguide.guidance.settings import EstimatorSettings
+
+SLIP_WINDOW_S = 3.0  # the time constant of the innovations' running mean square [s]
 
 
 class CurrentEstimator:
@@ -46,6 +53,8 @@ class CurrentEstimator:
         self.kf.R = np.array([[settings.velocity_std_mps**2]])
         self.kf.P = np.eye(2) * settings.current_prior_std_mps**2
         self.kf.x = np.zeros(2)
+        self.P_seen = self.kf.P.copy()  # the same measurements' covariance with the walk in time only [m^2/s^2]
+        self.slip_ms = 0.0  # mean square of the slip's innovations over about SLIP_WINDOW_S [m^2/s^2]
         self.t: float | None = None  # vehicle time of the last measurement [s]
         self.updates = 0
 
@@ -59,6 +68,21 @@ class CurrentEstimator:
         """The estimate's larger standard deviation [m/s] (the prior's until both components are seen)."""
         return float(math.sqrt(max(np.linalg.eigvalsh(self.kf.P))))
 
+    @property
+    def seen_std_mps(self) -> float:
+        """How well the headings flown pin the current down [m/s]: the larger standard deviation the same
+        measurements give with the random walk in time only (no shear). Along a straight leg the shear's spread
+        grows in the component the slip cannot see; this one does not, so it tells a current seen from enough
+        headings (trust its direction) from one not yet seen (``std_mps`` is the filter's own)."""
+        return float(math.sqrt(max(np.linalg.eigvalsh(self.P_seen))))
+
+    @property
+    def shear_weight(self) -> float:
+        """How much of ``current_shear_mps_per_sqrt_m`` applies now, 0..1: none while the slip's innovations
+        (RMS over ``SLIP_WINDOW_S``) stay below ``current_shear_onset_mps``, all of it from twice that."""
+        onset = self.settings.current_shear_onset_mps
+        return min(max(math.sqrt(self.slip_ms) / onset - 1.0, 0.0), 1.0)
+
     def update(
         self, t: float, v_ground: np.ndarray, heading_rad: float, turn_rate_radps: float, drifting: bool = False
     ) -> bool:
@@ -68,20 +92,26 @@ class CurrentEstimator:
         v_ground = np.asarray(v_ground, dtype=float)
         if not (np.all(np.isfinite(v_ground)) and math.isfinite(heading_rad) and math.isfinite(turn_rate_radps)):
             return False
+        s, dt = self.settings, 0.0
         if self.t is not None and t > self.t:  # random walk over the time since the last measurement and the way
-            dt = min(t - self.t, self.settings.max_dt_s)
+            dt = min(t - self.t, s.max_dt_s)
             metres = float(np.hypot(*v_ground)) * dt
-            s = self.settings
-            q = s.current_walk_mps_per_sqrt_s**2 * dt + s.current_shear_mps_per_sqrt_m**2 * metres
-            self.kf.P = self.kf.P + np.eye(2) * q
+            walk = s.current_walk_mps_per_sqrt_s**2 * dt
+            self.kf.P = self.kf.P + np.eye(2) * (walk + self.shear_weight * s.current_shear_mps_per_sqrt_m**2 * metres)
+            self.P_seen = self.P_seen + np.eye(2) * walk
         if self.t is None or t > self.t:
             self.t = t
-        if abs(turn_rate_radps) > math.radians(self.settings.current_max_turn_dps):
+        if abs(turn_rate_radps) > math.radians(s.current_max_turn_dps):
             return False
         if drifting:  # both components at once
-            self.kf.update(v_ground.copy(), R=np.eye(2) * self.settings.velocity_std_mps**2, H=np.eye(2))
+            z, H, R = v_ground.copy(), np.eye(2), np.eye(2) * s.velocity_std_mps**2
         else:
-            n = np.array([[-math.sin(heading_rad), math.cos(heading_rad)]])  # across the heading (starboard)
-            self.kf.update(np.array([float(n[0] @ v_ground)]), H=n)
+            H = np.array([[-math.sin(heading_rad), math.cos(heading_rad)]])  # across the heading (starboard)
+            z, R = np.array([float(H[0] @ v_ground)]), self.kf.R
+        self.kf.update(z, R=R, H=H)
+        _, self.P_seen = kalman_update(self.kf.x, self.P_seen, z, R, H)
+        if not drifting:  # the slip's innovation [m/s], averaged in its square over SLIP_WINDOW_S
+            a = min(dt / SLIP_WINDOW_S, 1.0)
+            self.slip_ms += a * (float(self.kf.y[0]) ** 2 - self.slip_ms)
         self.updates += 1
         return True
