@@ -151,9 +151,16 @@ class Helm:
 
     def on_station(self, heading_rad: float | None) -> bool:
         """Whether the boat can stay where it is: a boat that needs way only once it holds its line (on it, facing
-        along it: law/line_approach.py); crossing the arrival radius at way, off the line, is not arriving.
+        along it: law/line_approach.py); crossing the arrival radius at way, off the line, is not arriving. Nor is
+        it before the turn probe has told whether the boat turns in place (a rudder boat that started by the goal
+        would otherwise be held as one that pivots: it shuttled ahead and astern 0.3-0.45 m off for a minute).
         Without a heading (or in company) the helm sends velocities only, and the distance alone decides."""
-        return heading_rad is None or not self.ability.needs_way or self.in_company or self.line.holding
+        if heading_rad is None or self.in_company:
+            return True
+        a = self.ability
+        if not (a.pivot_seen or a.needs_way or self.cfg.command.probe_turn_s <= 0.0):
+            return False
+        return not a.needs_way or self.line.holding
 
     def line_radius_m(self) -> float:
         """Within this distance of the goal a boat that needs way makes for the line it will hold (twice its
@@ -226,16 +233,17 @@ class Helm:
         """The law's decision ``sp`` (guiding, hold, fault) as a setpoint: within the capture radius as near a
         point, beyond it as following the field (after the turn probe, :meth:`probe`); a zero or non-guiding
         decision goes as it is."""
-        if sp.state is GuidanceState.ARRIVED and not self.on_station(heading_rad):
-            # within the arrival radius, not yet holding its line (the supervisor has not arrived): still on the way
-            self.doing = LINE_DOING
-            return self.near(p_ned, sp.velocity_ned, heading_rad, current_ned, distance_m)
-        if sp.state is not GuidanceState.GUIDING or sp.ground_ned is None:
+        within = sp.state is GuidanceState.ARRIVED and not self.on_station(heading_rad)
+        if not within and (sp.state is not GuidanceState.GUIDING or sp.ground_ned is None):
             return np.asarray(sp.velocity_ned, dtype=float), None
         probe = self.probe(self.t, heading_rad, p_ned) if self.t is not None else None
         self.doing = "following the field" if probe is None else PROBE_DOING[self.probe_with_way]
         if probe is not None:
             return probe
+        if within:
+            # within the arrival radius, not yet holding its line (the supervisor has not arrived): still on the way
+            self.doing = LINE_DOING
+            return self.near(p_ned, sp.velocity_ned, heading_rad, current_ned, distance_m)
         if distance_m <= self.cfg.arrival.capture_radius_m:
             cmd = self.near(p_ned, sp.ground_ned, heading_rad, current_ned, distance_m)
             self.doing = self.doing if self.on_station(heading_rad) else LINE_DOING

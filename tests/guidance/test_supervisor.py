@@ -229,6 +229,26 @@ def test_a_boat_that_needs_way_arrives_only_once_it_holds_its_line(zshape_model:
     assert bench.fly(DT, obey=False, current=(0.0, 0.03))[-1].state is S.ARRIVED
 
 
+def test_a_boat_that_starts_by_the_goal_arrives_only_once_the_probe_has_told_how_it_turns(zshape_model: Path) -> None:
+    """Within the arrival radius from the start: a boat that turns in place (its bow follows the yaw it is sent)
+    arrives once the turn probe has seen it turn; one that does not (a rudder boat without way) is then known to
+    need way, and has not arrived, for it does not hold its line yet."""
+    for turns_in_place in (True, False):
+        bench = Bench(zshape_model)
+        helm = bench.sup.helm
+        bench.p = np.array([0.08, 0.0])  # 0.08 m from the goal, within the 0.15 m arrival radius
+        first = bench.fly(DT, obey=False)[0]
+        assert first.state is S.GUIDING and not bench.sup.arrived  # not before the probe has asked a turn
+        assert first.yaw_rad is not None and math.hypot(*first.velocity_ned) == 0.0  # speed 0, a heading off its own
+        decisions = bench.fly(bench.cfg.command.probe_turn_s + 1.0, obey=turns_in_place)
+        if turns_in_place:
+            assert helm.ability.pivot_seen and not helm.ability.needs_way
+            assert decisions[-1].state is S.ARRIVED and bench.sup.arrived
+        else:
+            assert helm.ability.needs_way
+            assert all(d.state is S.GUIDING for d in decisions) and not bench.sup.arrived
+
+
 def test_station_keeping_with_integral_action_holds_a_boat_unlike_the_model(zshape_model: Path) -> None:
     """A boat that makes good half of its setpoint through the water, in 0.05 m/s toward the east, with no
     current compensation: proportional feedback alone settles where kp e / 2 = |c|, 0.2 m off; the
