@@ -3,18 +3,22 @@
 On a terminal the table is redrawn in place about twice a second; when stdout is not a terminal
 (a pipe, a file, a test) each refresh is printed as a plain block followed by a blank line.
 ``--once`` prints a single table as soon as every alive vehicle has reported, ``--duration S``
-stops after S seconds; Ctrl-C stops cleanly with exit code 0.
+stops after S seconds; Ctrl-C (or SIGTERM) stops cleanly with exit code 0.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import shutil
+import signal
 import sys
+import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
@@ -67,8 +71,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def cmd_router(args: argparse.Namespace) -> int:
     """Hold a zenoh session in router mode open until SIGINT/SIGTERM (or ``--duration``)."""
-    import signal
-
     import zenoh
 
     from koopguide.base.config import ConfigError
@@ -109,22 +111,36 @@ def cmd_monitor(args: argparse.Namespace) -> int:
     zenoh_config = load_zenoh_config(args.zenoh_config)
     out = sys.stdout
     try:
-        with Monitor.open(zenoh_config) as monitor:
+        with Monitor.open(zenoh_config) as monitor, stop_on_signals() as stop:
             if args.once:
-                return _once(monitor, out)
-            return _live(monitor, out, args.duration)
-    except KeyboardInterrupt:  # Ctrl-C is how a live table is meant to end; the session is closed above
-        if out.isatty():
-            out.write("\n")
+                return _once(monitor, out, stop)
+            return _live(monitor, out, args.duration, stop)
+    except KeyboardInterrupt:  # Ctrl-C while the session was still opening; it is closed above
         return 0
     except BrokenPipeError:  # `koopguide monitor | head`: the reader has gone, which is fine
         os.dup2(os.open(os.devnull, os.O_WRONLY), out.fileno())  # no second error when Python flushes at exit
         return 0
 
 
-def _once(monitor: Monitor, out: TextIO) -> int:
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[threading.Event]:
+    """Ctrl-C (SIGINT) and SIGTERM set the event, which the loops below look at between two polls, instead of
+    raising KeyboardInterrupt wherever the main thread happens to be: raised inside a zenoh call, it can leave the
+    session unable to close (a monitor in CI hung for 10 s after Ctrl-C, its session never closed)."""
+    stop = threading.Event()
+    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _once(monitor: Monitor, out: TextIO, stop: threading.Event) -> int:
     deadline = monitor.opened_at + ONCE_TIMEOUT_S
     while True:
+        if stop.is_set():
+            return 0
         monitor.poll()
         now = time.monotonic()
         settled = now - monitor.opened_at >= ONCE_SETTLE_S
@@ -145,13 +161,17 @@ def _once(monitor: Monitor, out: TextIO) -> int:
     return 0
 
 
-def _live(monitor: Monitor, out: TextIO, duration: float | None) -> int:
+def _live(monitor: Monitor, out: TextIO, duration: float | None, stop: threading.Event) -> int:
     tty = out.isatty()
     start = time.monotonic()
     end = None if duration is None else start + duration
     next_draw = start
     drawn_lines = 0
     while True:
+        if stop.is_set():  # Ctrl-C is how a live table is meant to end
+            if tty:
+                out.write("\n")
+            return 0
         monitor.poll()
         now = time.monotonic()
         finished = end is not None and now >= end

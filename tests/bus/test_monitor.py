@@ -271,7 +271,8 @@ def test_monitor_duration_prints_plain_blocks_and_exits_0(tmp_path: Path):
 
 
 @pytest.mark.timeout(30)
-def test_monitor_ctrl_c_exits_0(tmp_path: Path):
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_monitor_ctrl_c_exits_0(tmp_path: Path, signum: int):
     port = free_port()
     with publishing("boat1", port):
         proc = subprocess.Popen(
@@ -285,7 +286,7 @@ def test_monitor_ctrl_c_exits_0(tmp_path: Path):
             first_line = proc.stdout.readline()  # the first table has started
             assert first_line.startswith("koopguide monitor"), first_line + proc.stderr.read()
             time.sleep(0.3)
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(signum)
             _, err = proc.communicate(timeout=10)
         finally:
             if proc.poll() is None:
