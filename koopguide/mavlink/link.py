@@ -86,8 +86,7 @@ class Link:
             await link._open()
         except OSError as exc:
             if not (link.endpoint.stream and settings.retry_first_open):
-                error = PortInUseError if exc.errno == errno.EADDRINUSE else EndpointError
-                raise error(_open_error(link.endpoint, exc)) from None
+                raise _open_error(link.endpoint, exc) from None
             log.warning("MAVLink %s: cannot open (%s); retrying", link.endpoint, exc.strerror or exc)
             link._schedule_reopen()
         return link
@@ -360,10 +359,12 @@ class _Stream(asyncio.Protocol):
             log.info("MAVLink %s: %s disconnected", link.endpoint, _name(self.peer))
 
 
-def _open_error(ep: Endpoint, exc: OSError) -> str:
+def _open_error(ep: Endpoint, exc: OSError) -> EndpointError:
     if exc.errno == errno.EADDRINUSE:
-        return f"MAVLink endpoint {ep}: port {ep.port} is already in use by another process (only one may own it)"
-    return f"MAVLink endpoint {ep}: cannot open ({exc.strerror or exc})"
+        return PortInUseError(
+            f"MAVLink endpoint {ep}: port {ep.port} is already in use by another process (only one may own it)"
+        )
+    return EndpointError(f"MAVLink endpoint {ep}: cannot open ({exc.strerror or exc})")
 
 
 def _name(source: Hashable) -> str:

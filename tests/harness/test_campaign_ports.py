@@ -21,7 +21,12 @@ def test_a_run_whose_port_was_taken_is_flown_on_another(
         taken.bind(("127.0.0.1", 0))  # held by "another process" for the whole run
         port = taken.getsockname()[1]
         picks: list[int] = []
-        monkeypatch.setattr(mission, "free_udp_port", lambda: picks.append(free_port() if picks else port) or picks[-1])
+
+        def pick() -> int:  # the taken port first, as if another process had bound it after the pick
+            picks.append(free_port() if picks else port)
+            return picks[-1]
+
+        monkeypatch.setattr(mission, "free_udp_port", pick)
         spec = campaign.RunSpec(str(zshape_model), "vectored", "calm", (-20.0, 0.0), 0, 10.0, 5.0, 0.0, 0)
         result = campaign.run_one(spec)
     assert len(picks) == 2 and picks[0] == port and picks[1] != port

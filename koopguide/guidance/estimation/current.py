@@ -66,7 +66,7 @@ class CurrentEstimator:
     @property
     def std_mps(self) -> float:
         """The estimate's larger standard deviation [m/s] (the prior's until both components are seen)."""
-        return float(math.sqrt(max(np.linalg.eigvalsh(self.kf.P))))
+        return larger_std(self.kf.P)
 
     @property
     def seen_std_mps(self) -> float:
@@ -74,7 +74,7 @@ class CurrentEstimator:
         measurements give with the random walk in time only (no shear). Along a straight leg the shear's spread
         grows in the component the slip cannot see; this one does not, so it tells a current seen from enough
         headings (trust its direction) from one not yet seen (``std_mps`` is the filter's own)."""
-        return float(math.sqrt(max(np.linalg.eigvalsh(self.P_seen))))
+        return larger_std(self.P_seen)
 
     @property
     def shear_weight(self) -> float:
@@ -115,3 +115,8 @@ class CurrentEstimator:
             self.slip_ms += a * (float(self.kf.y[0]) ** 2 - self.slip_ms)
         self.updates += 1
         return True
+
+
+def larger_std(P: np.ndarray) -> float:
+    """The larger standard deviation [m/s] of a 2x2 covariance ``P`` [m^2/s^2]: its larger eigenvalue's root."""
+    return float(math.sqrt(max(np.linalg.eigvalsh(P))))
