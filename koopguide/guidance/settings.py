@@ -91,6 +91,7 @@ class CommandSettings:
     with_yaw: bool
     lead_s: Annotated[float, Range(0.0, 5.0)]
     domain_margin: Annotated[float, Range(0.0, 10.0)]
+    turning_room_m: Distance  # a boat that needs way to turn may use this much beyond the domain (not the geofence)
     speed_grid: Annotated[int, Range(8, 512)]
 
     def __post_init__(self) -> None:

@@ -55,12 +55,37 @@ def law(zshape_model: Path) -> GuidanceLaw:
     return GuidanceLaw.from_config(load_field(zshape_model), cfg)
 
 
-def test_the_area_is_the_domain_in_ned(law: GuidanceLaw) -> None:
-    inside, east, far_east = law.outside_area(np.array([[0.5, -0.5], [0.0, 0.3], [0.0, 1.175]]))
-    assert inside == 0.0
-    assert east == pytest.approx(0.3 - 0.175, abs=0.01)  # the domain ends 0.175 m east of this goal
+def test_the_area_is_the_domain_in_ned_grown_by_the_turning_room(law: GuidanceLaw) -> None:
+    room = law.command.turning_room_m
+    assert room == 0.25  # the default
+    inside, edge, east, far_east = law.outside_area(np.array([[0.5, -0.5], [0.0, 0.4], [0.0, 0.55], [0.0, 1.425]]))
+    assert inside == 0.0 and edge == 0.0  # the domain ends 0.175 m east of this goal, the room 0.25 m further on
+    assert east == pytest.approx(0.55 - 0.175 - room, abs=0.01)
     assert far_east == pytest.approx(1.0, abs=0.01)
-    assert law.outside_area(np.array([0.0, 0.3])) == pytest.approx(east)  # one point: a float
+    assert law.outside_area(np.array([0.0, 0.55])) == pytest.approx(east)  # one point: a float
+    # round at the corners: 0.3 m beyond the domain's south-east corner diagonally is 0.05 m out
+    corner = law.frame.to_ned(np.array([law.domain_hi[0], law.domain_lo[1]]))
+    assert law.outside_area(corner + 0.3 * np.array([-1.0, 1.0]) / math.sqrt(2.0)) == pytest.approx(0.05, abs=0.005)
+
+
+def test_the_turning_room_never_reaches_past_the_geofence(zshape_model: Path) -> None:
+    fence = [[-2.0, 3.0], [-2.5, 0.2]]  # a wall 0.2 m east of the goal, inside the room
+    cfg = guidance_settings.load(
+        overrides={
+            "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0},
+            "failsafe": {"geofence_ned": fence},
+        }
+    )
+    law = GuidanceLaw.from_config(load_field(zshape_model), cfg)
+    assert law.outside_area(np.array([0.0, 0.3])) == pytest.approx(0.1)
+    no_room = guidance_settings.load(
+        overrides={
+            "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0},
+            "command": {"turning_room_m": 0.0},
+        }
+    )
+    law = GuidanceLaw.from_config(load_field(zshape_model), no_room)
+    assert law.outside_area(np.array([0.0, 0.3])) == pytest.approx(0.3 - 0.175, abs=0.01)  # the domain alone
 
 
 @settings(max_examples=40, deadline=None)

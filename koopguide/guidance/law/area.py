@@ -1,8 +1,11 @@
-"""The area a boat may manoeuvre in: the model's domain and the geofence (pure math).
+"""The area a boat may manoeuvre in: the model's domain with room to turn, and the geofence (pure math).
 
 The service knows neither a tank's walls nor a shore; what it knows is where its model holds (the
 demonstrations' box grown by ``command.domain_margin``) and, when one is configured, the geofence. A boat that
-needs room to turn (law/line_approach.py, law/approach_path.py) keeps to them.
+needs room to turn (law/line_approach.py, law/approach_path.py) keeps to the domain grown by
+``command.turning_room_m`` and to the geofence. The room is there because the demonstrations end at the goal, so
+the goal lies at the edge of their box (Zshape: 0.175 m inside the domain's east edge and 0.32 m inside its
+south edge), where a boat that turns on a circle of 1-2 m cannot line up on a current's line within the domain.
 
 Conventions: points ``(K, 2)`` local NED [m]; the domain in model units, placed by a
 :class:`~koopguide.guidance.law.frames.ModelFrame`.
@@ -17,13 +20,15 @@ from koopguide.guidance.law.frames import ModelFrame
 Fence = tuple[tuple[float, float], tuple[float, float]] | None  # ((N_min, N_max), (E_min, E_max)) [m]
 
 
-def outside_area(P: np.ndarray, frame: ModelFrame, lo: np.ndarray, hi: np.ndarray, fence: Fence) -> np.ndarray:
+def outside_area(
+    P: np.ndarray, frame: ModelFrame, lo: np.ndarray, hi: np.ndarray, fence: Fence, room_m: float = 0.0
+) -> np.ndarray:
     """How far each point of ``P`` ``(K, 2)`` [m] lies outside the domain [lo, hi] (model units, placed by
-    ``frame``) or the geofence [m]; 0 inside both."""
+    ``frame``) grown by ``room_m`` [m] (round at its corners), or outside the geofence [m]; 0 inside both."""
     P = np.atleast_2d(np.asarray(P, dtype=float))
     X = frame.to_model(P)
     excess = np.maximum(lo - X, 0.0) + np.maximum(X - hi, 0.0)
-    out = np.hypot(excess[:, 0], excess[:, 1]) * frame.scale
+    out = np.maximum(np.hypot(excess[:, 0], excess[:, 1]) * frame.scale - room_m, 0.0)
     if fence is not None:
         f_lo, f_hi = np.array([f[0] for f in fence]), np.array([f[1] for f in fence])
         fence_excess = np.maximum(f_lo - P, 0.0) + np.maximum(P - f_hi, 0.0)

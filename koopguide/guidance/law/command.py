@@ -140,7 +140,9 @@ class GuidanceLaw:
 
     def outside_area(self, p_ned: np.ndarray) -> np.ndarray | float:
         """How far points ``(K, 2)`` (or one ``(2,)``) [m] lie outside the area to manoeuvre in [m] (law/area.py)."""
-        out = outside_area(p_ned, self.frame, self.domain_lo, self.domain_hi, self.failsafe.geofence_ned)
+        out = outside_area(
+            p_ned, self.frame, self.domain_lo, self.domain_hi, self.failsafe.geofence_ned, self.command.turning_room_m
+        )
         return float(out[0]) if np.ndim(p_ned) == 1 else out
 
     def field_velocity_ned(self, p_ned: np.ndarray) -> np.ndarray:
