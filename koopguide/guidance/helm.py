@@ -78,11 +78,14 @@ class Helm:
         """At the start of guiding, for up to ``command.probe_turn_s``: speed 0 at a heading ``PROBE_RAD`` off the
         boat's (velocity + yaw; Rover turns a skid-steer boat on the spot, a rudder boat not at all). A boat
         whose heading moves ``PROBE_MOVED_RAD`` turns in place; one whose heading does not move needs way, and is
-        then asked a hard turn under way (``PROBE_WAY_RAD`` off, at ``command.turn_speed_mps``), for as long
-        again at most, until its turning circle is measured, to the side whose circle stays more inside the area
-        (``p_ned``: the boat's position; None: to starboard). None once done (or off, or no heading known)."""
+        then asked a hard turn under way (``PROBE_WAY_RAD`` off, at ``command.turn_speed_mps``) for as long
+        again, which measures its turning circle, to the side whose circle stays more inside the area
+        (``p_ned``: the boat's position; None: to starboard). The whole turn: the circle is the tightest seen in
+        it, and the first reading (1.5 s in, the turn still tightening) was 2-9 m against the rudder boat's
+        1.1-1.5 m; the plans and the look-ahead kept it until the next hard turn at manoeuvring speed. None once
+        done (or off, or no heading known)."""
         a = self.ability
-        if heading_rad is None or a.pivot_seen or (self.probe_with_way and a.radius_m is not None):
+        if heading_rad is None or a.pivot_seen:
             return None
         if self.probe_until is None:
             self.probe_until, self.probe_from = t + self.cfg.command.probe_turn_s, heading_rad

@@ -166,6 +166,34 @@ def test_the_turn_probe_tells_a_boat_that_turns_in_place_from_one_that_needs_way
     assert rudder.probe(2.0 * cfg.command.probe_turn_s + 0.2, 0.0) is None  # each stage no longer than probe_turn_s
 
 
+def test_the_probes_hard_turn_under_way_lasts_its_whole_stage_and_keeps_the_tightest_circle(law: GuidanceLaw) -> None:
+    """A rudder boat's turn tightens for seconds after the rudder goes over (its turn rate grows to r = u / R);
+    the circle read 1.5 s in was 2-9 m against the boat's 1.1-1.5 m. The probe goes on for its whole stage and
+    keeps the tightest circle seen."""
+    from koopguide.guidance.helm import Helm
+
+    cfg = guidance_settings.load()
+    stage, u, radius, lag = cfg.command.probe_turn_s, 0.15, 1.2, 1.5  # the boat: [s], [m/s], [m], [s]
+    rudder, t, heading = Helm(cfg, law), 0.0, 0.0
+    while not rudder.probe_with_way:  # it does not turn in place
+        rudder.observe(t, heading, 0.0, np.zeros(2), None)
+        rudder.probe(t, heading)
+        t += 0.05
+    begun, circles, commands = t, [], []
+    while t < begun + stage + 1.0:
+        rate = u / radius * (1.0 - math.exp(-(t - begun) / lag))  # the turn tightening
+        heading = wrap_pi(heading + rate * 0.05)
+        rudder.observe(t, heading, rate, u * np.array([math.cos(heading), math.sin(heading)]), None)
+        commands.append((t, rudder.probe(t, heading)))
+        circles.append(rudder.ability.radius_m)
+        t += 0.05
+    asked = [when - begun for when, command in commands if command is not None]
+    assert max(asked) == pytest.approx(stage, abs=0.11)  # the whole stage, not up to the first reading
+    first = next(r for r in circles if r is not None)
+    assert first > 2.0 * radius  # 1.5 s in, the turn still tightening
+    assert rudder.ability.radius_m == pytest.approx(radius, rel=0.1)  # the tightest, at the stage's end
+
+
 def test_the_probes_hard_turn_goes_to_the_side_that_stays_inside_the_area(law: GuidanceLaw) -> None:
     """Heading south 0.1 m inside the domain's east edge (the goal's side), a turn to port would run into the
     wall beyond it; the probe turns to starboard (west). Near the west edge it turns to port (east)."""
