@@ -105,13 +105,14 @@ class LineApproach:
         self.holding = False  # on the line near the goal: feedback only (hysteresis on HOLD_* / LEAVE_*)
         self.righting = False  # holding in a current, the bow off the line: way on until it is back (hysteresis)
         self.creeping = False  # ... creeping upstream past the goal (else drifting back onto it)
+        self.backing = False  # ... astern, righting took the boat CREEP_M past the goal: drifting back onto it first
 
     def reset(self) -> None:
         self.axis_rad, self.astern, self.in_current, self.travel, self.pivot = None, False, False, None, None
         self.edge_leg = None
         self.path.reset()
         self.capture.reset()
-        self.holding = self.righting = self.creeping = False
+        self.holding = self.righting = self.creeping = self.backing = False
 
     def aim(self, p_ned: np.ndarray, goal_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None) -> None:
         """Choose the line: along the current (the end nearest the one held, so that the line turns with the current
@@ -281,7 +282,11 @@ class LineApproach:
             self.creeping = True
         elif to_go < -0.5 * CREEP_M:
             self.creeping = False
-        if not (self.creeping or self.righting):
+        # astern the rudder is weak: righting went on with the bow still off and ran the boat 0.3 m and more upstream
+        # (holds of p95 0.30-0.32 m in uniform currents); CREEP_M past the goal it drifts back, and rights the bow
+        # on the next creep
+        self.backing = self.righting and self.astern and (to_go < -CREEP_M or (self.backing and not self.creeping))
+        if self.backing or not (self.creeping or self.righting):
             # drifting back: speed 0, the current carries the boat (not while the bow is off the line: drifting,
             # no water passes the rudder, and the bow would stay off)
             return Maneuver(heading, 0.0, self.astern)
