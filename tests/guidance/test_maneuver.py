@@ -229,26 +229,30 @@ def test_holding_in_a_current_creeps_upstream_across_the_goal_then_drifts_back_a
     assert all(m.speed_mps == 0.0 for m in drift)  # the current carries it back
 
 
-def test_holding_astern_righting_the_bow_goes_no_more_than_creep_m_past_the_goal_then_drifts_back() -> None:
-    """Astern (bow downstream) the rudder is weak: with the bow 30 deg off, righting keeps way on upstream, but
-    only to CREEP_M past the goal; then the boat drifts back (speed 0) onto the goal and rights the bow on the next
-    creep (it used to run on 0.3 m and more upstream: hold p95 of 0.30-0.32 m in uniform currents)."""
+@pytest.mark.parametrize("astern", [False, True])
+def test_holding_righting_the_bow_goes_no_more_than_creep_m_past_the_goal_then_drifts_back(astern: bool) -> None:
+    """With the bow 30 deg off, righting keeps way on upstream, but only to CREEP_M past the goal; then the boat
+    drifts back (speed 0) onto the goal and rights the bow on the next creep. It used to run on: astern, where the
+    rudder is weak, 0.3 m and more upstream (hold p95 of 0.30-0.32 m in uniform currents); ahead, 0.27 m, beyond
+    the reacquire radius."""
     line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.075, way_mps=0.15, approach_mps=0.15)
-    goal, current = np.zeros(2), np.array([0.03, 0.0])  # toward N: upstream is S, the bow downstream (N) astern
-    on_line, off = 0.0, math.radians(30.0)
+    goal, current = np.zeros(2), np.array([0.03, 0.0])  # toward N: upstream is S
+    on_line = 0.0 if astern else math.pi  # astern the bow lies downstream (N), ahead upstream (S)
+    off = wrap_pi(on_line + math.radians(30.0))
+    sign = -1.0 if astern else 1.0
 
     def at(north: float, bow: float) -> Maneuver:
         p = np.array([north, 0.0])
         line.aim(p, goal, bow, current)
         return line.command(p, goal, bow, radius_m=1.3, current_ned=current, t=0.0)
 
-    at(0.05, on_line)  # taken on, holding astern
-    assert line.holding and line.astern
+    at(0.05, on_line)  # taken on, holding
+    assert line.holding and line.astern == astern
     righting = [at(north, off) for north in (0.0, -0.05, -0.1)]  # upstream of the goal, still within CREEP_M
-    assert all(m.speed_mps < 0.0 and m.astern for m in righting)  # way on astern, upstream
+    assert all(sign * m.speed_mps > 0.0 and m.astern == astern for m in righting)  # way on, upstream
     back = [at(north, off) for north in (-CREEP_M - 0.01, -0.05, 0.0, 0.5 * CREEP_M - 0.01)]
     assert all(m.speed_mps == 0.0 for m in back)  # beyond CREEP_M: drift back, all the way onto the goal
-    assert at(0.5 * CREEP_M + 0.01, off).speed_mps < 0.0  # then a creep upstream again, righting on the way
+    assert sign * at(0.5 * CREEP_M + 0.01, off).speed_mps > 0.0  # then a creep upstream again, righting on the way
 
 
 def test_a_planned_path_is_driven_to_its_end_before_the_hold_takes_over() -> None:

@@ -105,7 +105,7 @@ class LineApproach:
         self.holding = False  # on the line near the goal: feedback only (hysteresis on HOLD_* / LEAVE_*)
         self.righting = False  # holding in a current, the bow off the line: way on until it is back (hysteresis)
         self.creeping = False  # ... creeping upstream past the goal (else drifting back onto it)
-        self.backing = False  # ... astern, righting took the boat CREEP_M past the goal: drifting back onto it first
+        self.backing = False  # ... righting took the boat CREEP_M past the goal: drifting back onto it first
 
     def reset(self) -> None:
         self.axis_rad, self.astern, self.in_current, self.travel, self.pivot = None, False, False, None, None
@@ -263,7 +263,7 @@ class LineApproach:
         ``HOLD_MAX_MPS`` over ground, by a cycle about the goal: creep upstream (at least ``CREEP_MPS``) from
         ``CREEP_M`` / 2 downstream of it to ``CREEP_M`` / 2 past it, then speed 0 (Rover's stop controller,
         throttle off) while the current carries the boat back; with the bow off the line, way on (at least
-        ``HOLD_WAY_MPS``) until it is back."""
+        ``HOLD_WAY_MPS``) until it is back, but no further than ``CREEP_M`` past the goal (then it drifts back)."""
         c = np.asarray(current_ned, dtype=float)
         up = -c / float(np.hypot(*c))
         self.travel = 1.0 if float(a @ up) > 0.0 else -1.0
@@ -282,10 +282,11 @@ class LineApproach:
             self.creeping = True
         elif to_go < -0.5 * CREEP_M:
             self.creeping = False
-        # astern the rudder is weak: righting went on with the bow still off and ran the boat 0.3 m and more upstream
-        # (holds of p95 0.30-0.32 m in uniform currents); CREEP_M past the goal it drifts back, and rights the bow
-        # on the next creep
-        self.backing = self.righting and self.astern and (to_go < -CREEP_M or (self.backing and not self.creeping))
+        # righting costs about R times the angle in way (0.3 m for 15 deg ahead; astern, where the rudder is weak,
+        # the bow did not come back): it ran the boat 0.3 m upstream and beyond reacquire_radius_m (holds of p95
+        # 0.30-0.32 m astern in uniform currents; ahead, a drift-off whose capture then ran 0.45 m past the goal).
+        # CREEP_M past the goal the boat drifts back instead, and rights the bow further on the next creep
+        self.backing = self.righting and (to_go < -CREEP_M or (self.backing and not self.creeping))
         if self.backing or not (self.creeping or self.righting):
             # drifting back: speed 0, the current carries the boat (not while the bow is off the line: drifting,
             # no water passes the rudder, and the bow would stay off)
