@@ -85,18 +85,16 @@ def cmd_router(args: argparse.Namespace) -> int:
         session = zenoh.open(cfg)
     except zenoh.ZError as exc:
         raise ConfigError(f"cannot start the zenoh router: {zenoh_error_text(exc)}") from None
-    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt))
     try:
-        print(
-            f"koopguide zenoh-router: {session.zid()} listening on {json.loads(cfg.get_json('listen/endpoints'))}",
-            file=sys.stderr,
-            flush=True,
-        )
-        end = math.inf if args.duration is None else time.monotonic() + args.duration
-        while time.monotonic() < end:
-            time.sleep(min(0.2, max(0.0, end - time.monotonic())))
-    except KeyboardInterrupt:
-        pass
+        with stop_on_signals() as stop:
+            print(
+                f"koopguide zenoh-router: {session.zid()} listening on {json.loads(cfg.get_json('listen/endpoints'))}",
+                file=sys.stderr,
+                flush=True,
+            )
+            end = math.inf if args.duration is None else time.monotonic() + args.duration
+            while not stop.is_set() and time.monotonic() < end:
+                time.sleep(min(0.2, max(0.0, end - time.monotonic())))
     finally:
         session.close()
     return 0

@@ -297,6 +297,42 @@ def test_monitor_ctrl_c_exits_0(tmp_path: Path, signum: int):
 
 
 @pytest.mark.timeout(30)
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_zenoh_router_stops_on_ctrl_c_or_sigterm_and_exits_0(tmp_path: Path, signum: int):
+    """The router waits on the same stop flag as the monitor (it used to raise KeyboardInterrupt from its SIGTERM
+    handler, wherever the main thread was)."""
+    path = tmp_path / "router.json5"
+    path.write_text(
+        json.dumps(
+            {
+                "mode": "router",
+                "listen": {"endpoints": [f"tcp/127.0.0.1:{free_port()}"]},
+                "scouting": {"multicast": {"enabled": False}},
+            }
+        )
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "koopguide", "zenoh-router", "--zenoh-config", str(path)],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        first_line = proc.stderr.readline()
+        assert first_line.startswith("koopguide zenoh-router:"), first_line + proc.stderr.read()
+        time.sleep(0.3)
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+
+
+@pytest.mark.timeout(30)
 @pytest.mark.parametrize(
     ("args", "expected"),
     [
