@@ -51,8 +51,16 @@ def test_a_turn_on_the_spot_is_a_path_with_reversals_and_no_longer_than_a_loop()
 
 @pytest.fixture(scope="module")
 def law(zshape_model: Path) -> GuidanceLaw:
-    cfg = guidance_settings.load(overrides={"frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0}})
-    return GuidanceLaw.from_config(load_field(zshape_model), cfg)
+    return law_with(zshape_model)
+
+
+def law_with(zshape_model: Path, **sections: dict) -> GuidanceLaw:
+    """The Zshape law placed as in the missions (goal at NED (0, 0), 0.04 m per unit, model +x East), with the
+    settings' ``sections`` overridden."""
+    frame = {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0}
+    return GuidanceLaw.from_config(
+        load_field(zshape_model), guidance_settings.load(overrides={"frame": frame, **sections})
+    )
 
 
 def test_the_area_is_the_domain_in_ned_grown_by_the_turning_room(law: GuidanceLaw) -> None:
@@ -70,22 +78,10 @@ def test_the_area_is_the_domain_in_ned_grown_by_the_turning_room(law: GuidanceLa
 
 def test_the_turning_room_never_reaches_past_the_geofence(zshape_model: Path) -> None:
     fence = [[-2.0, 3.0], [-2.5, 0.2]]  # a wall 0.2 m east of the goal, inside the room
-    cfg = guidance_settings.load(
-        overrides={
-            "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0},
-            "failsafe": {"geofence_ned": fence},
-        }
-    )
-    law = GuidanceLaw.from_config(load_field(zshape_model), cfg)
-    assert law.outside_area(np.array([0.0, 0.3])) == pytest.approx(0.1)
-    no_room = guidance_settings.load(
-        overrides={
-            "frame": {"goal_ned": [0.0, 0.0], "scale": 0.04, "heading_deg": 90.0},
-            "command": {"turning_room_m": 0.0},
-        }
-    )
-    law = GuidanceLaw.from_config(load_field(zshape_model), no_room)
-    assert law.outside_area(np.array([0.0, 0.3])) == pytest.approx(0.3 - 0.175, abs=0.01)  # the domain alone
+    fenced = law_with(zshape_model, failsafe={"geofence_ned": fence})
+    assert fenced.outside_area(np.array([0.0, 0.3])) == pytest.approx(0.1)
+    no_room = law_with(zshape_model, command={"turning_room_m": 0.0})
+    assert no_room.outside_area(np.array([0.0, 0.3])) == pytest.approx(0.3 - 0.175, abs=0.01)  # the domain alone
 
 
 @settings(max_examples=40, deadline=None)
