@@ -270,29 +270,32 @@ def test_monitor_duration_prints_plain_blocks_and_exits_0(tmp_path: Path):
     assert elapsed < 6.0
 
 
+def stopped_by_signal(cmd: list[str], signum: int, ready: str, ready_on_stdout: bool) -> tuple[int, str]:
+    """Start ``cmd``, wait for its first line on stdout (or stderr) to start with ``ready``, send it ``signum``;
+    its exit code and stderr (killed if it has not exited 10 s later)."""
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        first_line = (proc.stdout if ready_on_stdout else proc.stderr).readline()
+        assert first_line.startswith(ready), first_line + proc.stderr.read()
+        time.sleep(0.3)
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, err
+
+
 @pytest.mark.timeout(30)
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_monitor_ctrl_c_exits_0(tmp_path: Path, signum: int):
     port = free_port()
-    with publishing("boat1", port):
-        proc = subprocess.Popen(
-            [*MONITOR, "--zenoh-config", str(config_file(tmp_path, port))],
-            cwd=REPO,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
+    with publishing("boat1", port):  # the first table has started
+        code, err = stopped_by_signal(
+            [*MONITOR, "--zenoh-config", str(config_file(tmp_path, port))], signum, "koopguide monitor", True
         )
-        try:
-            first_line = proc.stdout.readline()  # the first table has started
-            assert first_line.startswith("koopguide monitor"), first_line + proc.stderr.read()
-            time.sleep(0.3)
-            proc.send_signal(signum)
-            _, err = proc.communicate(timeout=10)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-    assert proc.returncode == 0, err
+    assert code == 0, err
     assert "Traceback" not in err
 
 
@@ -311,24 +314,9 @@ def test_zenoh_router_stops_on_ctrl_c_or_sigterm_and_exits_0(tmp_path: Path, sig
             }
         )
     )
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "koopguide", "zenoh-router", "--zenoh-config", str(path)],
-        cwd=REPO,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        first_line = proc.stderr.readline()
-        assert first_line.startswith("koopguide zenoh-router:"), first_line + proc.stderr.read()
-        time.sleep(0.3)
-        proc.send_signal(signum)
-        _, err = proc.communicate(timeout=10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert proc.returncode == 0, err
+    router = [sys.executable, "-m", "koopguide", "zenoh-router", "--zenoh-config", str(path)]
+    code, err = stopped_by_signal(router, signum, "koopguide zenoh-router:", False)
+    assert code == 0, err
     assert "Traceback" not in err
 
 
