@@ -15,19 +15,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from koopguide.guidance.law.capture import CAPTURE_M, MANEUVERS, STEP_S, CaptureSearch
-from koopguide.guidance.law.line_approach import HOLD_CROSS_M, HOLD_RAD
+from koopguide.guidance.law.capture import CAPTURE_M, ENTRY_CROSS_M, ENTRY_RAD, MANEUVERS, STEP_S, CaptureSearch
 from koopguide.guidance.law.maneuver import unit, wrap_pi
 
 ARRIVAL_M = 0.15  # the default arrival radius
 
 
 def holds(p: np.ndarray, psi: float, axis: float) -> bool:
-    """Within the hold's bounds (law/line_approach.py): on the line, facing along it (either end), at the goal."""
+    """Within the bounds the hold takes a boat on at (law/line_approach.py): on the line, facing along it (either
+    end), at the goal."""
     a = unit(axis)
     cross = float(p @ np.array([-a[1], a[0]]))
     off = abs(wrap_pi(psi - axis))
-    return abs(cross) <= HOLD_CROSS_M and min(off, math.pi - off) <= HOLD_RAD and float(np.hypot(*p)) <= ARRIVAL_M
+    return abs(cross) <= ENTRY_CROSS_M and min(off, math.pi - off) <= ENTRY_RAD and float(np.hypot(*p)) <= ARRIVAL_M
 
 
 def fly(

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from koopguide.guidance.estimation.turning import RATE_FLOOR, TurnAbility
 from koopguide.guidance.law.approach_path import ApproachPath
+from koopguide.guidance.law.capture import ENTRY_RAD
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
 from koopguide.guidance.law.line_approach import CREEP_M, CREEP_MPS, EDGE_LEG_M, LineApproach
 from koopguide.guidance.law.maneuver import ASTERN_RAD, MIN_SPEED_MPS, Maneuver, ManeuverPlanner, wrap_pi
@@ -255,17 +256,24 @@ def test_holding_righting_the_bow_goes_no_more_than_creep_m_past_the_goal_then_d
     assert sign * at(0.5 * CREEP_M + 0.01, off).speed_mps > 0.0  # then a creep upstream again, righting on the way
 
 
-def test_a_planned_path_is_driven_to_its_end_before_the_hold_takes_over() -> None:
-    """0.3 m downstream of the goal on the current's line (toward W), the bow 20 deg off upstream: near enough to
-    hold, but a planned path under way is driven to its end first (its last leg lines the bow up); once it is
-    done, the hold takes over from the same pose."""
+@pytest.mark.parametrize("off_deg", [8.0, 20.0])
+def test_a_planned_path_is_driven_to_its_end_before_the_hold_takes_over(off_deg: float) -> None:
+    """0.3 m downstream of the goal on the current's line (toward W), the bow 8 deg off upstream: near enough to
+    hold, but a planned path under way is driven to its end first (its last leg lines the bow up); once it is done,
+    the hold takes over from the same pose. 20 deg off is not near enough (the hold takes a boat on only lined up
+    as well as the capture search hands one over, ENTRY_RAD: taken on 20-25 deg off, its righting set boats across
+    their line and held them at 0.3-0.7 m p95): within CAPTURE_M of the goal the capture search lines it up."""
     line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.15)
     goal, current = np.zeros(2), np.array([0.0, -0.03])  # upstream is east
-    p, heading = np.array([0.0, -0.3]), math.radians(110.0)
+    p, heading = np.array([0.0, -0.3]), math.radians(90.0 + off_deg)
     line.aim(p, goal, heading, current)
     assert line.path.plan(0.0, p, heading, goal, (math.pi / 2, -math.pi / 2), 1.3, None, current)
     m = line.command(p, goal, heading, radius_m=1.3, current_ned=current, t=0.05)
-    assert not line.holding and line.path.active
+    assert not line.holding
+    if off_deg > math.degrees(ENTRY_RAD):
+        assert line.capture.active and not line.path.active
+        return
+    assert line.path.active and not line.capture.active
     line.path.reset()  # the path driven (or abandoned): the same pose is held
     line.command(p, goal, heading, radius_m=1.3, current_ned=current, t=0.1)
     assert line.holding

@@ -229,6 +229,37 @@ def test_a_boat_that_needs_way_arrives_only_once_it_holds_its_line(zshape_model:
     assert bench.fly(DT, obey=False, current=(0.0, 0.03))[-1].state is S.ARRIVED
 
 
+def test_a_boat_that_needs_way_does_not_arrive_on_a_tick_without_its_heading(zshape_model: Path) -> None:
+    """Within the arrival radius, across its line: a rudder boat whose attitude goes stale for a moment has not
+    arrived on those ticks either (nothing says it holds its line; traced, such arrivals came crossing the goal at
+    way, 48 deg off the line). A boat never seen to need way, with no attitude at all, arrives on its distance."""
+    bench = Bench(zshape_model, command={"probe_turn_s": 0.0})
+    helm, estimator = bench.sup.helm, bench.sup.vehicle.current
+    helm.ability.needs_way, helm.ability.radius_m = True, 1.2  # as the turn probe finds a rudder boat
+    estimator.kf.x[:] = (0.0, 0.03)
+    estimator.kf.P[:] = estimator.P_seen[:] = np.eye(2) * 1e-6
+    estimator.updates = 1
+    bench.p, bench.heading = np.array([0.08, 0.0]), 0.0  # facing across the current's E-W line
+    bench.fly(1.0, obey=False, current=(0.0, 0.03))
+    stale = bench.cfg.failsafe.stale_after_s
+    for _ in range(round((stale + 0.5) / DT)):  # fixes and ticks, no ATTITUDE
+        bench.fix()
+        d = bench.tick()
+        bench.advance()
+        assert d.state is not S.ARRIVED
+    assert bench.sup.vehicle.heading_at(bench.t) is None  # the stale stretch was reached
+    assert not bench.sup.arrived
+
+    velocity_only = Bench(zshape_model, command={"probe_turn_s": 0.0})
+    velocity_only.p = np.array([0.08, 0.0])
+    for _ in range(round(1.0 / DT)):
+        velocity_only.heartbeat()
+        velocity_only.fix()
+        velocity_only.tick()
+        velocity_only.advance()
+    assert velocity_only.sup.vehicle.heading_at(velocity_only.t) is None and velocity_only.sup.arrived
+
+
 def test_a_boat_that_starts_by_the_goal_arrives_only_once_the_probe_has_told_how_it_turns(zshape_model: Path) -> None:
     """Within the arrival radius from the start: a boat that turns in place (its bow follows the yaw it is sent)
     arrives once the turn probe has seen it turn; one that does not (a rudder boat without way) is then known to

@@ -1,8 +1,8 @@
 """Capturing the holding line near the goal: a receding-horizon search over short manoeuvres (pure math).
 
 A boat that needs way to turn (a rudder boat, estimation/turning.py) holds the goal only on its line (through
-the goal along the current, law/line_approach.py): within ``HOLD_CROSS_M`` of it across, facing along it within
-``HOLD_RAD``. Close to the goal, the last few decimetres onto that pose are a parking problem: a turning circle
+the goal along the current, law/line_approach.py): within ``ENTRY_CROSS_M`` of it across, facing along it within
+``ENTRY_RAD``. Close to the goal, the last few decimetres onto that pose are a parking problem: a turning circle
 of R ~ 1.3 m turns the bow by only 0.1 rad per 0.13 m of way, and a boat 0.25 m beside the line, facing along
 it, needs ahead-and-astern legs with the rudder over to get onto it (as a car parks), while the current sets it
 off meanwhile. Line-of-sight feedback there steers toward the line by a few degrees and shuttles along it

@@ -11,10 +11,11 @@ turn (the autopilot reverses the rudder astern, docs/rover.md). Four modes, one 
 * within ``CAPTURE_M`` of the goal and not yet holding: a receding-horizon search over ahead/astern
   manoeuvres with the rudder over (law/capture.py), the last decimetres onto the line (a path tracked in the
   water on a current that is not the goal's ended off the line there, and LOS feedback shuttled along it);
-* on the line near the goal (``HOLD_*``, left beyond ``LEAVE_*``): feedback; in a current into the current
-  only (:meth:`LineApproach._hold_in_current`), in still water ahead or astern along the line. A planned path
+* on the line near the goal (taken on within the capture search's ``ENTRY_*`` bounds however the boat got
+  there, left beyond ``LEAVE_*``): feedback; in a current into the current only
+  (:meth:`LineApproach._hold_in_current`), in still water ahead or astern along the line. A planned path
   is driven to its end before the hold takes over: its last leg lines the bow up with the line (taken over
-  mid-path, a hold began up to ``HOLD_RAD`` off, and turning the bow back with way on carried the boat
+  mid-path, a hold began up to 25 deg off, and turning the bow back with way on carried the boat
   0.3-0.5 m past the goal);
 * otherwise (no circle measured yet, or no path fits): line-of-sight guidance onto the line with K-turns,
   reversing before the area's edge, as below.
@@ -68,7 +69,6 @@ FLIP_M = 0.03  # on the line: ahead <-> astern once the goal is this far behind 
 LEASH_M = 0.3  # while turning (a K-turn): the boat goes on this far past the goal before it reverses [m]
 TURNING_RAD = math.radians(20.0)  # a heading error this large is a turn: keep way on
 K_TURN_RAD = math.radians(45.0)  # ... and this large a K-turn about the goal
-HOLD_CROSS_M, HOLD_RAD = 0.1, math.radians(25.0)  # on the line near the goal: feedback only (and HOLD_ALONG_M)
 LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.4, math.radians(60.0), 0.8  # ... until beyond these: a planned approach
 UNARRIVED_LEAVE_CROSS_M = 0.15  # ... or, not yet arrived, beyond this across: the capture search (law/capture.py)
 HOLD_WAY_MPS = 0.06  # holding in a current, turning: at least this over ground into it [m/s]
@@ -325,10 +325,12 @@ class LineApproach:
                 leave_cross = min(leave_cross, UNARRIVED_LEAVE_CROSS_M)
             self.holding = abs(cross) <= leave_cross and facing <= LEAVE_RAD and abs(along) <= LEAVE_ALONG_M
         else:
-            # the capture search hands over only a bow it has lined up well (taken on at the hold's own bound, 20 deg
-            # off and astern, the hold's righting ran the boat 0.5 m off in a uniform current)
-            cross_in, facing_in = (ENTRY_CROSS_M, ENTRY_RAD) if self.capture.active else (HOLD_CROSS_M, HOLD_RAD)
-            near = abs(cross) <= cross_in and facing <= facing_in and abs(along) <= HOLD_ALONG_M
+            # the hold takes on only a bow lined up as well as the capture search hands over, however the boat got
+            # there: from 20 deg off (and astern) its righting ran a boat 0.5 m off in a uniform current; and a hold
+            # taken on at a planned path's end up to 25 deg off (the bound before) held at 0.3-0.7 m p95 in about
+            # one uniform-current run in 25 (righting ahead, or astern, where the rudder is weak, setting the boat
+            # across its line and beyond the reacquire radius)
+            near = abs(cross) <= ENTRY_CROSS_M and facing <= ENTRY_RAD and abs(along) <= HOLD_ALONG_M
             if near and self.path.active:  # a planned path is driven to its end first (its last leg lines the bow up)
                 m = self.path.command(t, p, heading_rad, current_ned)
                 if m is not None:
