@@ -326,10 +326,9 @@ class LineApproach:
             self.holding = abs(cross) <= leave_cross and facing <= LEAVE_RAD and abs(along) <= LEAVE_ALONG_M
         else:
             # the hold takes on only a bow lined up as well as the capture search hands over, however the boat got
-            # there: from 20 deg off (and astern) its righting ran a boat 0.5 m off in a uniform current; and a hold
-            # taken on at a planned path's end up to 25 deg off (the bound before) held at 0.3-0.7 m p95 in about
-            # one uniform-current run in 25 (righting ahead, or astern, where the rudder is weak, setting the boat
-            # across its line and beyond the reacquire radius)
+            # there: from 20 deg off its righting ran a boat 0.5 m off in a uniform current; taken on at a path's end
+            # up to 25 deg off (the bound before), holds of 0.3-0.7 m p95 in about one uniform run in 25 (righting,
+            # ahead or astern, set the boat across its line and beyond the reacquire radius)
             near = abs(cross) <= ENTRY_CROSS_M and facing <= ENTRY_RAD and abs(along) <= HOLD_ALONG_M
             if near and self.path.active:  # a planned path is driven to its end first (its last leg lines the bow up)
                 m = self.path.command(t, p, heading_rad, current_ned)
