@@ -81,10 +81,11 @@ class Bench:
         obey: bool = True,
         heartbeat_every_s: float = 1.0,
         response: float = 1.0,
+        attitude: bool = True,
     ):
         """Fix, attitude, decision, move: ``seconds`` of vehicle time; the decisions. The boat makes good
         ``response`` times the setpoint through the water (1: exactly the setpoint), its bow to the setpoint's yaw
-        when it has one, else along the setpoint."""
+        when it has one, else along the setpoint. ``attitude`` False: no ATTITUDE is sent (stale, or none)."""
         decisions = []
         next_hb = self.t
         for _ in range(round(seconds / DT)):
@@ -92,7 +93,8 @@ class Bench:
                 self.heartbeat()
                 next_hb += heartbeat_every_s
             self.fix()
-            self.attitude()
+            if attitude:
+                self.attitude()
             d = self.tick()
             if d.velocity_ned is not None:
                 self.sup.setpoint_sent(self.t)
@@ -211,17 +213,25 @@ def test_the_state_leaves_arrived_once_the_boat_may_be_beyond_the_radius_given_t
     assert left_at is not None and reacquire - 4.0 * spread < left_at <= reacquire - spread, (left_at, spread)
 
 
+def rudder_across_its_line(zshape_model: Path) -> Bench:
+    """A boat known to need way (as the turn probe finds a rudder boat), the current toward E known (seen from
+    every side), 0.08 m north of the goal facing across the current's E-W line."""
+    bench = Bench(zshape_model, command={"probe_turn_s": 0.0})
+    helm, estimator = bench.sup.helm, bench.sup.vehicle.current
+    helm.ability.needs_way, helm.ability.radius_m = True, 1.2
+    estimator.kf.x[:] = (0.0, 0.03)
+    estimator.kf.P[:] = estimator.P_seen[:] = np.eye(2) * 1e-6
+    estimator.updates = 1
+    bench.p, bench.heading = np.array([0.08, 0.0]), 0.0
+    return bench
+
+
 def test_a_boat_that_needs_way_arrives_only_once_it_holds_its_line(zshape_model: Path) -> None:
     """A rudder boat within the arrival radius but across its holding line (the current's, here toward the east)
     has not arrived (it could not stay): the state stays ``guiding`` and the reason says what it does, until
     it holds the line; then it arrives."""
-    bench = Bench(zshape_model, command={"probe_turn_s": 0.0})
-    helm, estimator = bench.sup.helm, bench.sup.vehicle.current
-    helm.ability.needs_way, helm.ability.radius_m = True, 1.2  # as the turn probe finds a rudder boat
-    estimator.kf.x[:] = (0.0, 0.03)  # the current, known (seen from every side)
-    estimator.kf.P[:] = estimator.P_seen[:] = np.eye(2) * 1e-6
-    estimator.updates = 1
-    bench.p, bench.heading = np.array([0.08, 0.0]), 0.0  # 0.08 m north of the goal, facing across the E-W line
+    bench = rudder_across_its_line(zshape_model)
+    helm = bench.sup.helm
     for d in bench.fly(1.0, obey=False, current=(0.0, 0.03)):
         assert d.state is S.GUIDING and not bench.sup.arrived and not helm.line.holding
         assert "line it can hold" in d.reason, d.reason
@@ -233,30 +243,17 @@ def test_a_boat_that_needs_way_does_not_arrive_on_a_tick_without_its_heading(zsh
     """Within the arrival radius, across its line: a rudder boat whose attitude goes stale for a moment has not
     arrived on those ticks either (nothing says it holds its line; traced, such arrivals came crossing the goal at
     way, 48 deg off the line). A boat never seen to need way, with no attitude at all, arrives on its distance."""
-    bench = Bench(zshape_model, command={"probe_turn_s": 0.0})
-    helm, estimator = bench.sup.helm, bench.sup.vehicle.current
-    helm.ability.needs_way, helm.ability.radius_m = True, 1.2  # as the turn probe finds a rudder boat
-    estimator.kf.x[:] = (0.0, 0.03)
-    estimator.kf.P[:] = estimator.P_seen[:] = np.eye(2) * 1e-6
-    estimator.updates = 1
-    bench.p, bench.heading = np.array([0.08, 0.0]), 0.0  # facing across the current's E-W line
+    bench = rudder_across_its_line(zshape_model)
     bench.fly(1.0, obey=False, current=(0.0, 0.03))
     stale = bench.cfg.failsafe.stale_after_s
-    for _ in range(round((stale + 0.5) / DT)):  # fixes and ticks, no ATTITUDE
-        bench.fix()
-        d = bench.tick()
-        bench.advance()
-        assert d.state is not S.ARRIVED
+    decisions = bench.fly(stale + 0.5, obey=False, current=(0.0, 0.03), attitude=False)
+    assert all(d.state is not S.ARRIVED for d in decisions)
     assert bench.sup.vehicle.heading_at(bench.t) is None  # the stale stretch was reached
     assert not bench.sup.arrived
 
     velocity_only = Bench(zshape_model, command={"probe_turn_s": 0.0})
     velocity_only.p = np.array([0.08, 0.0])
-    for _ in range(round(1.0 / DT)):
-        velocity_only.heartbeat()
-        velocity_only.fix()
-        velocity_only.tick()
-        velocity_only.advance()
+    velocity_only.fly(1.0, obey=False, attitude=False)
     assert velocity_only.sup.vehicle.heading_at(velocity_only.t) is None and velocity_only.sup.arrived
 
 

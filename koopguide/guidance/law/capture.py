@@ -49,9 +49,9 @@ TURN_RAD = math.radians(45.0)  # a turning manoeuvre asks for this much off its 
 SPEED_MPS = 0.12  # through the water on a manoeuvre (at least WATER_MARGIN_MPS faster than the current) [m/s]
 WATER_MARGIN_MPS = 0.04
 MIN_RADIUS_M, MAX_RADIUS_M = 1.0, 2.5  # the turning radius the model uses, clamped [m]
-ENTRY_CROSS_M = 0.1  # the hold takes the boat on from the search this close to the line (across) [m]
-ENTRY_RAD = math.radians(10.0)  # ... facing along it this well: the hold's own entry is 25 deg, and from 20 deg off
-# it keeps way on to right the bow, which carried a boat handed over 20 deg off 0.5 m from the goal (uniform current)
+ENTRY_CROSS_M = 0.1  # the hold takes a boat on this close to the line (across), from the search or not [m]
+ENTRY_RAD = math.radians(10.0)  # ... facing along it this well: from 20 deg off the hold keeps way on to right the
+# bow, which carried a boat handed over 20 deg off 0.5 m from the goal (uniform current)
 CROSS_SCALE_M = ENTRY_CROSS_M  # the scales of the score
 ALONG_SCALE_M = 0.15  # the arrival radius [m]
 HEADING_SCALE_RAD = ENTRY_RAD
