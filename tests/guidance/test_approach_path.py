@@ -206,6 +206,37 @@ def test_the_probes_hard_turn_goes_to_the_side_that_stays_inside_the_area(law: G
         assert rudder.probe_heading == pytest.approx(wrap_pi(south + side * PROBE_WAY_RAD))
 
 
+def test_in_sheared_water_the_holding_line_is_the_still_water_one_for_the_rest_of_the_mission(
+    law: GuidanceLaw,
+) -> None:
+    """A rudder boat 0.36 m from the goal with a clear current estimate (0.04 m/s toward north): in uniform water
+    it makes for the current's line (through the goal, north-south); once the estimator has seen shear (its
+    innovations beyond uniform water's), for the line from the boat to the goal, and it keeps that line when the
+    shear is no longer seen."""
+    from koopguide.guidance.helm import SHEARED_WEIGHT, Helm
+
+    cfg = guidance_settings.load()
+    p, heading, current = np.array([0.3, -0.2]), math.radians(150.0), np.array([0.04, 0.0])
+    to_goal = math.atan2(0.2, -0.3)
+
+    def rudder_near_goal(shear: float) -> Helm:
+        helm = Helm(cfg, law)
+        helm.ability.needs_way, helm.ability.radius_m = True, 1.3
+        helm.observe(0.0, heading, 0.0, np.zeros(2), current, 0.005, shear)
+        helm.near(p, -p, heading, current, float(np.hypot(*p)))
+        return helm
+
+    uniform = rudder_near_goal(0.0)
+    assert uniform.line.in_current and math.cos(uniform.line.axis_rad) == pytest.approx(-1.0)  # bow south: downstream
+    assert not rudder_near_goal(SHEARED_WEIGHT).sheared  # the threshold itself is not yet shear
+    sheared = rudder_near_goal(1.0)
+    assert not sheared.line.in_current and sheared.line.axis_rad == pytest.approx(to_goal)
+    for k in range(1, 20):  # the shear is no longer seen: the water is still the sheared water
+        sheared.observe(0.1 * k, heading, 0.0, np.zeros(2), current, 0.005, 0.0)
+        sheared.near(p, -p, heading, current, float(np.hypot(*p)))
+    assert sheared.sheared and not sheared.line.in_current and sheared.line.axis_rad == pytest.approx(to_goal)
+
+
 TOWARD = st.sampled_from([0.0, 90.0, 180.0, 270.0])
 
 
