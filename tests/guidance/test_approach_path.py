@@ -15,10 +15,10 @@ from hypothesis import strategies as st
 
 from koopguide.guidance import settings as guidance_settings
 from koopguide.guidance.estimation.current import CurrentEstimator
-from koopguide.guidance.law import reeds_shepp
-from koopguide.guidance.law.approach_path import FINAL_M, SHORT_M, ApproachPath
+from koopguide.guidance.law import approach_path, reeds_shepp
+from koopguide.guidance.law.approach_path import FINAL_M, SHORT_M, ApproachPath, room_along_m
 from koopguide.guidance.law.command import GuidanceLaw
-from koopguide.guidance.law.maneuver import wrap_pi
+from koopguide.guidance.law.maneuver import unit, wrap_pi
 from koopguide.model.field import load_field
 
 coords = st.floats(-3.0, 3.0)
@@ -114,6 +114,29 @@ def test_a_planned_approach_ends_on_the_current_line_short_of_the_goal_at_most_a
         assert float(motion @ -end[:2]) > 0.0  # the goal lies ahead of its motion
     slack = 0.1 + 0.02 + law.outside_area(start)  # AREA_SLACK_M, and the coarser check between samples
     assert float(np.max(law.outside_area(pts[:, :2]))) <= slack
+
+
+def test_in_still_water_the_planned_line_leaves_room_on_both_sides_of_a_goal_by_the_areas_edge(
+    law: GuidanceLaw, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The missions' goal lies 0.45 m from the area's east edge along the east-west line, 0.6 m or more along the
+    others: a boat holding ahead and astern on that line, or capturing it with way on, runs out of room (most
+    rudder runs that did not arrive in the double gyre had made for it). From this start the shortest approach
+    ends on it; the plan ends on another line."""
+    goal = np.zeros(2)
+    rooms = {k: room_along_m(goal, unit(math.radians(45.0 * k)), law.outside_area) for k in range(8)}
+    assert rooms[2] == rooms[6] == pytest.approx(0.45, abs=0.05)  # east-west
+    assert min(rooms[k] for k in (0, 1, 3, 4, 5, 7)) >= 0.6 - 1e-9
+    start, heading = np.array([1.0, -2.0]), 0.0  # north of the goal's parallel, 2 m west, bow north
+
+    def line_of_plan() -> float:
+        path = ApproachPath(cruise_mps=0.15, max_speed_mps=0.3)
+        assert path.plan(0.0, start, heading, goal, None, 1.4, law.outside_area)
+        return math.degrees(path.final_heading) % 180.0
+
+    assert line_of_plan() == pytest.approx(135.0)  # north-west to south-east, 0.6 m of room both ways
+    monkeypatch.setattr(approach_path, "ROOM_COST", 0.0)
+    assert line_of_plan() == pytest.approx(90.0)  # the room not counted: the east-west line
 
 
 def test_tracking_a_path_goes_ahead_and_astern_run_by_run_and_slows_to_each_runs_end() -> None:
