@@ -36,6 +36,7 @@ LINE_CURRENT_SIGMAS = 2.0  # a current estimate this many of its standard deviat
 LINE_DOING = "making for the line it can hold the goal on"  # near the goal, a boat that needs way, off its line
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
 SHEARED_WEIGHT = 0.5  # the current estimator's shear weight beyond which the water is sheared (estimation/current.py)
+EDGE_INSET_M = 0.05  # a boat this close to the area's edge (a tank's wall, a bank) slips by it, not the current [m]
 Command = tuple[np.ndarray, float | None]  # (velocity NED [m/s], yaw [rad] or None for velocity only)
 
 
@@ -157,6 +158,15 @@ class Helm:
         self.water_mps = u
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
         self.ability.update(t, asked, u, turn_rate_radps)
+
+    def at_edge(self, p_ned: np.ndarray) -> bool:
+        """Whether ``p_ned`` [m] lies within ``EDGE_INSET_M`` of the area's edge, or beyond it. A boat set onto a
+        tank's wall there (or a bank) slides along it: its slip is not the current's, and read as such it took the
+        estimate 0.1 m/s off, whose innovations on the next headings then read as sheared water (a rudder boat in
+        a uniform current then held a still-water line across it and never arrived: the default campaign's rudder
+        start 2 toward the east, stop 30)."""
+        steps = EDGE_INSET_M * np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+        return float(np.max(self.law.outside_area(np.asarray(p_ned, dtype=float) + steps))) > 0.0
 
     def on_station(self, heading_rad: float | None) -> bool:
         """Whether the boat can stay where it is: a boat that needs way only once it holds its line (on it, facing

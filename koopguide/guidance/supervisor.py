@@ -132,8 +132,10 @@ class Supervisor:
         return True
 
     def update_current(self, t: float) -> None:
-        """After the command: the fix at ``t`` into the current (all of it while disarmed: the boat drifts)."""
-        self.vehicle.update_current(t, drifting=self.armed is False)
+        """After the command: the fix at ``t`` into the current (all of it while disarmed: the boat drifts), unless
+        the boat is at the area's edge (``Helm.at_edge``: a wall's slip is not the current's)."""
+        if not self.helm.at_edge(self.vehicle.tracker.predict(t)[0]):
+            self.vehicle.update_current(t, drifting=self.armed is False)
 
     def on_clock_restart(self, restart: ev.ClockRestart) -> None:
         what = "went back (a reboot)" if restart.rebooted else "jumped forward"

@@ -494,3 +494,32 @@ def test_a_neighbour_heard_longer_ago_than_the_timeout_is_forgotten(zshape_model
     (d,) = bench.fly(DT)
     assert not bench.sup.separation_active and "separation" not in d.reason
     assert bench.sup.neighbours.latest == {}
+
+
+def test_slip_at_the_areas_edge_is_not_read_as_current(zshape_model: Path) -> None:
+    """A boat set onto a tank's wall at the area's east edge slides north along it, bow to the north-east: its
+    slip across the bow is the wall's doing, not a current's, and stays out of the estimate (stop 30: read as
+    current it took the estimate 0.1 m/s off, and its innovations then read as sheared water). The same slide
+    well inside the area is measured."""
+    probe = Bench(zshape_model).sup
+    inside_e, outside_e = -1.0, 2.0  # the area's east edge (domain plus turning room) lies between, at N = 1.5 m
+    for _ in range(40):
+        mid = 0.5 * (inside_e + outside_e)
+        inside = probe.law.outside_area(np.array([1.5, mid])) == 0.0
+        inside_e, outside_e = (mid, outside_e) if inside else (inside_e, mid)
+    assert probe.helm.at_edge(np.array([1.5, inside_e - 0.03])) and probe.helm.at_edge(np.array([1.5, inside_e + 0.3]))
+    assert not probe.helm.at_edge(np.array([1.5, inside_e - 0.15]))
+    for east_m, measured in ((inside_e - 0.02, False), (inside_e - 0.6, True)):
+        b = Bench(zshape_model)
+        b.p = np.array([1.5, east_m])
+        b.fly(0.5, obey=False)
+        before = b.sup.vehicle.current.updates
+        for _ in range(100):  # 5 s sliding north at 0.1 m/s, the bow 45 deg to starboard of the slide
+            b.advance()
+            b.p = b.p + np.array([0.1, 0.0]) * DT
+            b.fix(v=np.array([0.1, 0.0]))
+            b.sup.handle(Attitude(b.wall, b.t, math.radians(45.0), 0.0))
+            b.sup.update_current(b.t)
+        estimate = b.sup.vehicle.current.current_ned
+        assert (b.sup.vehicle.current.updates > before) is measured, (east_m, before)
+        assert (float(np.hypot(*estimate)) > 0.03) is measured, (east_m, estimate)
