@@ -108,7 +108,7 @@ class GuidanceDaemon:
         return dict(self.supervisor.vehicle.gate.counts)
 
     def position_age(self) -> float | None:
-        return self.supervisor.position_age(self.clock.now())
+        return self.supervisor.vehicle.position_age(self.clock.now())
 
     def estimate(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The estimated position and velocity now (NED m, m/s), None before the first fix."""

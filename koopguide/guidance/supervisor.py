@@ -132,9 +132,8 @@ class Supervisor:
         return True
 
     def update_current(self, t: float) -> None:
-        """After the command: the fix at ``t`` into the current (all of it while disarmed: the boat drifts), unless
-        the boat is at the area's edge (``Helm.at_edge``: a wall's slip is not the current's)."""
-        if not self.helm.at_edge(self.vehicle.tracker.predict(t)[0]):
+        """After the command: the fix at ``t`` into the current (all of it while disarmed), unless at the edge."""
+        if not self.helm.at_edge(self.vehicle.tracker.predict(t)[0]):  # a wall's slip is not the current's
             self.vehicle.update_current(t, drifting=self.armed is False)
 
     def on_clock_restart(self, restart: ev.ClockRestart) -> None:
@@ -170,9 +169,6 @@ class Supervisor:
     def link_up(self, wall: float) -> bool:
         return self.heartbeat_wall is not None and wall - self.heartbeat_wall <= self.cfg.mavlink.link_timeout_s
 
-    def position_age(self, now: float) -> float | None:
-        return self.vehicle.position_age(now)
-
     def check_output(self, tick: ev.Tick) -> ev.Decision | None:
         """The watchdog of the service's own output: guiding or arrived in GUIDED, yet no setpoint for
         OUTPUT_GAP_PERIODS command periods, is a fault (zero velocity, and the reason)."""
@@ -202,10 +198,10 @@ class Supervisor:
                     f"vehicle heartbeat lost for {cfg.mavlink.link_timeout_s:.1f} s; waiting for the link",
                 )
             return self._out(ZERO, S.WAITING, "no vehicle heartbeat", send=False, t=now)
-        requests = self.schedule.streams(self.position_age(now), wall)
+        requests = self.schedule.streams(self.vehicle.position_age(now), wall)
         if self.operator_hold is not None:  # before everything but the link: no mode change, no arming
             return self._out(ZERO, S.HOLD, f"operator hold ({self.operator_hold})", in_guided, now, requests)
-        age = self.position_age(now)
+        age = self.vehicle.position_age(now)
         if age is None:
             return self._out(ZERO, S.WAITING, "waiting for LOCAL_POSITION_NED", in_guided, now, requests)
         if age > cfg.failsafe.stale_after_s:
