@@ -120,6 +120,34 @@ def test_the_shears_walk_follows_the_slips_innovations():
     np.testing.assert_allclose(grown, np.eye(2) * SHEARED**2 * 0.1)
 
 
+@pytest.mark.parametrize("gap_s", [0.5, 1.0, 2.0])
+@pytest.mark.parametrize("kick_mps", [0.05, 0.1, 0.2])
+def test_one_slip_after_a_gap_is_one_sample_not_sheared_water(gap_s, kick_mps):
+    """A boat that leaves a tank's wall (or ends a hard turn) sways for a moment: the first measurement after the
+    gap in measurements is one sample of the innovations' window, not the window's worth. Sheared water, whose
+    innovations stay large sample after sample, still shows as shear within the window."""
+    cfg = with_shear(SHEARED)
+    c = np.array([-0.03, 0.0])
+    est, t = CurrentEstimator(cfg), 0.0
+    for k in range(200):  # uniform water, the heading turning slowly: both components seen
+        heading = 0.01 * k
+        n = np.array([-math.sin(heading), math.cos(heading)])
+        est.update(t, 0.1 * np.array([math.cos(heading), math.sin(heading)]) + c, heading, 0.0)
+        t += 0.1
+    assert est.shear_weight == 0.0
+    heading = 0.01 * 200
+    n = np.array([-math.sin(heading), math.cos(heading)])
+    t += gap_s  # nothing measured (at the area's edge, or turning fast)
+    est.update(t, c + kick_mps * n, heading, 0.0)  # the hull's sway as it leaves the wall
+    assert est.shear_weight < 0.5  # the helm's latch (helm.SHEARED_WEIGHT) stays open
+    for _ in range(30):  # ... but 3 s of such slips are sheared water
+        t += 0.1
+        heading += 0.2
+        n = np.array([-math.sin(heading), math.cos(heading)])
+        est.update(t, c + kick_mps * n * (1 if int(t * 10) % 2 else -1), heading, 0.0)
+    assert est.shear_weight > 0.5
+
+
 def fly_through_a_shear(est: CurrentEstimator) -> float:
     """North then east through water flowing toward the north, then 2 m on east through a vortex's shear (the
     current turns from toward the north to toward the north-west along the leg), then north again: the east

@@ -41,6 +41,8 @@ from filterpy.kalman import update as kalman_update
 from koopguide.guidance.settings import EstimatorSettings
 
 SLIP_WINDOW_S = 3.0  # the time constant of the innovations' running mean square [s]
+SLIP_SAMPLE_S = 0.2  # one innovation stands for at most this long of that window (two command periods) [s]
+SLIP_CLIP_ONSETS = 3.0  # ... and counts at most this many current_shear_onset_mps (a spike is one; shear keeps coming)
 
 
 class CurrentEstimator:
@@ -110,9 +112,13 @@ class CurrentEstimator:
             z, R = np.array([float(H[0] @ v_ground)]), self.kf.R
         self.kf.update(z, R=R, H=H)
         _, self.P_seen = kalman_update(self.kf.x, self.P_seen, z, R, H)
-        if not drifting:  # the slip's innovation [m/s], averaged in its square over SLIP_WINDOW_S
-            a = min(dt / SLIP_WINDOW_S, 1.0)
-            self.slip_ms += a * (float(self.kf.y[0]) ** 2 - self.slip_ms)
+        if not drifting:  # the slip's innovation [m/s], averaged in its square over SLIP_WINDOW_S; after a gap
+            # (a turn, the area's edge) the first one is one sample, not the window's worth, and a spike counts as
+            # SLIP_CLIP_ONSETS: the hull's sway as it left a tank's wall, one innovation weighted by the gap before
+            # it, latched a uniform current as sheared (rudder, stop 31)
+            a = min(dt, SLIP_SAMPLE_S) / SLIP_WINDOW_S
+            y = min(abs(float(self.kf.y[0])), SLIP_CLIP_ONSETS * s.current_shear_onset_mps)
+            self.slip_ms += a * (y**2 - self.slip_ms)
         self.updates += 1
         return True
 

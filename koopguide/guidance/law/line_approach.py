@@ -58,7 +58,7 @@ from collections.abc import Callable
 import numpy as np
 
 from koopguide.guidance.law.approach_path import HOLD_ALONG_M, ApproachPath
-from koopguide.guidance.law.capture import CAPTURE_LEAVE_M, CAPTURE_M, ENTRY_CROSS_M, ENTRY_RAD, CaptureSearch
+from koopguide.guidance.law.capture import CAPTURE_LEAVE_M, CAPTURE_M, ENTRY_CROSS_M, CaptureSearch, entry_rad
 from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, capped, unit, wrap_pi
 
 MIN_DELTA_M = 0.3  # the smallest LOS look-ahead [m]
@@ -326,10 +326,10 @@ class LineApproach:
             self.holding = abs(cross) <= leave_cross and facing <= LEAVE_RAD and abs(along) <= LEAVE_ALONG_M
         else:
             # the hold takes on only a bow lined up as well as the capture search hands over, however the boat got
-            # there: from 20 deg off its righting ran a boat 0.5 m off in a uniform current; taken on at a path's end
-            # up to 25 deg off (the bound before), holds of 0.3-0.7 m p95 in about one uniform run in 25 (righting,
-            # ahead or astern, set the boat across its line and beyond the reacquire radius)
-            near = abs(cross) <= ENTRY_CROSS_M and facing <= ENTRY_RAD and abs(along) <= HOLD_ALONG_M
+            # there: taken on 20-25 deg off, its righting set boats across the line and beyond the reacquire radius
+            # (holds of 0.3-0.7 m p95 in one uniform run in 25); held astern, tighter still (capture.entry_rad)
+            entry = entry_rad(self.axis_rad, current_ned if self.in_current else None)
+            near = abs(cross) <= ENTRY_CROSS_M and facing <= entry and abs(along) <= HOLD_ALONG_M
             if near and self.path.active:  # a planned path is driven to its end first (its last leg lines the bow up)
                 m = self.path.command(t, p, heading_rad, current_ned)
                 if m is not None:
