@@ -6,6 +6,7 @@ Conventions: NED [m], [m/s]; headings [rad] from north.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -228,6 +229,28 @@ def test_holding_in_a_current_creeps_upstream_across_the_goal_then_drifts_back_a
     creep, drift = cycle[:3] + cycle[-1:], cycle[3:6]
     assert all(m.speed_mps >= CREEP_MPS and not m.astern for m in creep)  # ahead, upstream
     assert all(m.speed_mps == 0.0 for m in drift)  # the current carries it back
+
+
+def test_holding_off_the_line_a_creep_slows_to_its_end_instead_of_coasting_past_it() -> None:
+    """Off the line the creep's speed is the offset's (way for the rudder), but it slows to CREEP_MPS at the
+    creep's end, CREEP_M / 2 past the goal: coasting on from 0.09 m/s, boats ran 0.11-0.14 m past the goal and,
+    0.17 m off the line, beyond 0.2 m from it (the default campaign's rudder start 5 toward S, stop 31)."""
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.075, way_mps=0.15, approach_mps=0.15)
+    goal, current, bow = np.zeros(2), np.array([0.03, 0.0]), math.pi  # current toward N, bow upstream (S)
+
+    def at(north: float, east: float) -> Maneuver:
+        p = np.array([north, east])
+        line.aim(p, goal, bow, current)
+        return line.command(p, goal, bow, radius_m=1.3, current_ned=current, t=0.0)
+
+    half = 0.5 * CREEP_M
+    at(half + 0.01, 0.05)  # taken on near the line
+    assert line.holding
+    creep = [at(north, 0.17).speed_mps for north in np.linspace(half + 0.01, -half + 0.01, 13)]
+    assert creep[0] > 2.5 * CREEP_MPS  # way on while the creep has room
+    assert all(b <= a + 1e-12 for a, b in itertools.pairwise(creep))  # slowing all the way
+    assert CREEP_MPS <= creep[-1] <= CREEP_MPS + 0.5 * 0.01 + 1e-9  # at its end, the creep's own speed
+    assert at(-half - 0.01, 0.17).speed_mps == 0.0  # then the current carries it back
 
 
 @pytest.mark.parametrize("astern", [False, True])
