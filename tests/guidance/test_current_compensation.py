@@ -131,7 +131,6 @@ def test_one_slip_after_a_gap_is_one_sample_not_sheared_water(gap_s, kick_mps):
     est, t = CurrentEstimator(cfg), 0.0
     for k in range(200):  # uniform water, the heading turning slowly: both components seen
         heading = 0.01 * k
-        n = np.array([-math.sin(heading), math.cos(heading)])
         est.update(t, 0.1 * np.array([math.cos(heading), math.sin(heading)]) + c, heading, 0.0)
         t += 0.1
     assert est.shear_weight == 0.0
