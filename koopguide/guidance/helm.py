@@ -59,6 +59,7 @@ class Helm:
         self.t: float | None = None  # vehicle time of the last observation [s]
         self.current_std = 0.0  # the current estimate's spread [m/s]
         self.sheared = False  # the water has shown shear (latched: a property of the water, not of the boat)
+        self.shearing = False  # ... and shows it now
         self.probe_until: float | None = None  # vehicle time the turn probe ends [s]
         self.probe_heading: float | None = None  # the heading it asks [rad]
         self.probe_from: float | None = None  # the heading when it began [rad]
@@ -148,7 +149,8 @@ class Helm:
         """The boat's heading, turn rate, ground velocity and the estimated current (and its spread, and how much
         shear its estimator sees: ``CurrentEstimator.shear_weight``) at vehicle time ``t``."""
         self.t, self.current_std = t, current_std_mps
-        self.sheared = self.sheared or shear_weight > SHEARED_WEIGHT
+        self.shearing = shear_weight > SHEARED_WEIGHT  # the estimator sees shear now
+        self.sheared = self.sheared or self.shearing
         if velocity_ned is not None:
             self.speed_mps = float(np.hypot(*velocity_ned))
         if heading_rad is None or turn_rate_radps is None or velocity_ned is None:
@@ -295,8 +297,8 @@ class Helm:
         # in sheared water the current at the boat is no guide to the goal's (in the campaign's double gyre it turns
         # by 90 deg within 0.3 m of the goal): a line along the estimate swung 5-15 deg/s, and the boat chasing it
         # lined up too late or never (86.7% arrived in 180 runs); the still-water line, kept once chosen, 94.4%
-        c = None if self.sheared else c
-        self.line.aim(p_ned, self.law.goal_ned, heading_rad, c)
+        drift, c = (None if self.shearing else c), (None if self.sheared else c)
+        self.line.aim(p_ned, self.law.goal_ned, heading_rad, c, drift)
         m = self.line.command(
             p_ned,
             self.law.goal_ned,

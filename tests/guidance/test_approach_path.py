@@ -235,7 +235,8 @@ def test_in_sheared_water_the_holding_line_is_the_still_water_one_for_the_rest_o
     """A rudder boat 0.36 m from the goal with a clear current estimate (0.04 m/s toward north): in uniform water
     it makes for the current's line (through the goal, north-south); once the estimator has seen shear (its
     innovations beyond uniform water's), for the line from the boat to the goal, and it keeps that line when the
-    shear is no longer seen."""
+    shear is no longer seen. The capture search's model boat drifts on the estimate at the boat, except while the
+    estimator sees shear there (stop 32)."""
     from koopguide.guidance.helm import SHEARED_WEIGHT, Helm
 
     cfg = guidance_settings.load()
@@ -252,12 +253,15 @@ def test_in_sheared_water_the_holding_line_is_the_still_water_one_for_the_rest_o
     uniform = rudder_near_goal(0.0)
     assert uniform.line.in_current and math.cos(uniform.line.axis_rad) == pytest.approx(-1.0)  # bow south: downstream
     assert not rudder_near_goal(SHEARED_WEIGHT).sheared  # the threshold itself is not yet shear
+    assert uniform.line.drift == pytest.approx(current)
     sheared = rudder_near_goal(1.0)
     assert not sheared.line.in_current and sheared.line.axis_rad == pytest.approx(to_goal)
+    assert sheared.line.drift is None  # shear seen here and now: the estimate at the boat is no guide either
     for k in range(1, 20):  # the shear is no longer seen: the water is still the sheared water
         sheared.observe(0.1 * k, heading, 0.0, np.zeros(2), current, 0.005, 0.0)
         sheared.near(p, -p, heading, current, float(np.hypot(*p)))
     assert sheared.sheared and not sheared.line.in_current and sheared.line.axis_rad == pytest.approx(to_goal)
+    assert sheared.line.drift == pytest.approx(current)  # ... but the capture search drifts on the estimate
 
 
 TOWARD = st.sampled_from([0.0, 90.0, 180.0, 270.0])

@@ -38,17 +38,20 @@ def fly(
     outside=None,
     limit_s: float = 60.0,
     until=None,
+    axis: float | None = None,
+    told: np.ndarray | None = None,
 ) -> tuple[list[tuple[float, np.ndarray, float]], float]:
     """Drive the ideal boat by the search alone from ``start`` (the goal at the origin, the line along the current,
-    or north in still water) for ``limit_s`` or until ``until(t, p, psi)``: its track (t, p, psi) and the largest
-    speed asked."""
+    or north in still water, unless ``axis`` is given) for ``limit_s`` or until ``until(t, p, psi)``: its track
+    (t, p, psi) and the largest speed asked. ``told``: the current the search is told (default: the one there)."""
     search = CaptureSearch(max_speed_mps=0.3)
     still = float(np.hypot(*current)) == 0.0
-    axis = 0.0 if still else math.atan2(-current[1], -current[0])
+    axis = (0.0 if still else math.atan2(-current[1], -current[0])) if axis is None else axis
+    told = (None if still else current) if told is None else told
     p, psi, water, t, dt, fastest = start.astype(float), heading, 0.0, 0.0, 0.05, 0.0
     track = [(t, p, psi)]
     while t < limit_s and not (until is not None and until(t, p, psi)):
-        m = search.command(t, p, np.zeros(2), psi, water, axis, None if still else current, radius_m, outside)
+        m = search.command(t, p, np.zeros(2), psi, water, axis, told, radius_m, outside)
         fastest = max(fastest, abs(m.speed_mps))
         h = unit(psi)
         target = 0.0 if m.speed_mps == 0.0 else m.speed_mps - float(current @ h)  # through the water
@@ -158,6 +161,34 @@ def test_a_hold_beside_the_line_short_of_arriving_gives_way_to_the_capture_searc
     assert outcomes[True] == (True, False)
 
 
+def test_a_hold_the_line_turned_away_from_short_of_arriving_gives_way_to_the_capture_search() -> None:
+    """The hold takes a bow on within ENTRY_RAD of its line, but the current estimate may turn the line after that:
+    holds that arrived 15-17 deg off it held 0.46-0.82 m p95 in a uniform current (rudder, stop 31). Not yet
+    arrived, a bow 18 deg off the turned line is captured again; 12 deg off it is still held; once arrived, or on a
+    still-water line, the hold's hysteresis stands."""
+    from koopguide.guidance.law.line_approach import LineApproach
+
+    current = np.array([-0.03, 0.0])  # toward S: the line's bow end north
+    outcomes = {}
+    for arrived, off_deg in ((False, 18.0), (False, 12.0), (True, 18.0)):
+        line = LineApproach(0.3, 0.5, 0.075, 0.15, 0.25)
+        line.aim(np.zeros(2), np.zeros(2), 0.0, current)
+        line.command(np.array([-0.05, 0.0]), np.zeros(2), 0.0, 1.3, current, t=0.0, arrived=arrived)
+        assert line.holding  # on the line, facing along it
+        c = 0.03 * unit(math.radians(180.0 + off_deg))
+        line.aim(np.zeros(2), np.zeros(2), 0.0, c)
+        line.command(np.array([-0.05, 0.0]), np.zeros(2), 0.0, 1.3, c, t=0.1, arrived=arrived)
+        outcomes[(arrived, off_deg)] = line.holding
+    assert abs(math.degrees(wrap_pi(line.axis_rad))) == pytest.approx(18.0)
+    assert outcomes == {(False, 18.0): False, (False, 12.0): True, (True, 18.0): True}
+    still = LineApproach(0.3, 0.5, 0.075, 0.15, 0.25)  # a still-water line does not turn: the bow's swing is its own
+    still.aim(np.array([-0.05, 0.0]), np.zeros(2), 0.0, None)
+    still.command(np.array([-0.05, 0.0]), np.zeros(2), 0.0, 1.3, t=0.0, arrived=False)
+    assert still.holding
+    still.command(np.array([-0.05, 0.0]), np.zeros(2), math.radians(18.0), 1.3, t=0.1, arrived=False)
+    assert still.holding
+
+
 def test_a_boat_out_of_the_area_comes_back_in_first() -> None:
     """Pressed 0.25 m beyond the area's east edge by a current toward it (a tank's wall lies there), the boat is
     brought back inside before it settles on the line (at the area's edge, capture and planner took turns)."""
@@ -184,3 +215,31 @@ def test_a_boat_beside_its_line_bow_downstream_does_not_lie_there() -> None:
     start = 0.2 * np.array([-a[1], a[0]]) - 0.08 * a
     t, _ = capture(start, math.radians(45.0), current, radius_m=1.45)
     assert t is not None and t < 45.0, t
+
+
+@pytest.mark.parametrize("along", [0.2, 0.0, -0.2])
+@pytest.mark.parametrize("bow_off_rad", [0.0, 0.3, -0.3])
+def test_onto_a_still_water_line_across_the_current_the_search_drifts_its_model_on_the_current(
+    along: float, bow_off_rad: float
+) -> None:
+    """In sheared water the line is the still-water one, which may lie across the current at the goal (the
+    campaign's vortex: 0.025 m/s across the line the field's approach drew through the goal). The search's model
+    boat drifts on the current estimate at the boat all the same, and gets the boat onto that line from 0.25 m
+    upstream of it within seconds; a model in still water there is set off the line by every manoeuvre it plans:
+    slower or not at all (4 of these 9 poses not within 60 s)."""
+    current = 0.025 * unit(math.radians(45.0))  # toward NE
+    axis = math.radians(-45.0)  # the line NW-SE through the goal, across the current
+    a = unit(axis)
+    start = -0.25 * np.array([-a[1], a[0]]) + along * a  # upstream of the line
+
+    def held(t: float, p: np.ndarray, psi: float) -> bool:
+        return holds(p, psi, axis)
+
+    outcomes = []
+    for told in (current, np.zeros(2)):
+        track, _ = fly(start, axis + bow_off_rad, current, 1.3, axis=axis, told=told, until=held)
+        t, p, psi = track[-1]
+        outcomes.append(t if held(t, p, psi) else None)
+    drifting, still = outcomes
+    assert drifting is not None and drifting < 15.0, outcomes
+    assert still is None or still > drifting, outcomes

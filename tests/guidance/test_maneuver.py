@@ -18,7 +18,8 @@ from koopguide.guidance.estimation.turning import RATE_FLOOR, TurnAbility
 from koopguide.guidance.law.approach_path import ApproachPath
 from koopguide.guidance.law.capture import ENTRY_RAD
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
-from koopguide.guidance.law.line_approach import CREEP_M, CREEP_MPS, EDGE_LEG_M, LineApproach
+from koopguide.guidance.law.creep_cycle import CREEP_M, CREEP_MPS
+from koopguide.guidance.law.line_approach import EDGE_LEG_M, LineApproach
 from koopguide.guidance.law.maneuver import ASTERN_RAD, MIN_SPEED_MPS, Maneuver, ManeuverPlanner, wrap_pi
 from koopguide.mavlink.rover import MASK_VELOCITY_YAW, velocity_setpoint
 

@@ -1,0 +1,66 @@
+"""Keeping a boat that needs way on a point in a current: a cycle of creeps upstream about it (pure math).
+
+A rudder boat held on the current's line through the goal (law/line_approach.py) must keep the water passing
+its rudder one way: into the current only, ahead with the bow upstream or astern with it downstream, never the
+other way over ground (that would turn the water past the rudder round, and the autopilot sets the rudder by the
+speed's sign, docs/rover.md). So it keeps station by a cycle about the goal: it creeps upstream (at least
+``CREEP_MPS`` over ground, at most ``HOLD_MAX_MPS``) from ``CREEP_M`` / 2 downstream of the goal to ``CREEP_M``
+/ 2 past it, then is sent speed 0 (Rover's stop controller: throttle off) while the current carries it back;
+with the bow off the line it keeps way on (at least ``HOLD_WAY_MPS``) until the bow is back, but no further than
+``CREEP_M`` past the goal (then it drifts back first).
+
+Conventions: distances [m] along the current's line, positive upstream; speeds over ground [m/s], unsigned (the
+caller signs them ahead or astern); heading errors [rad].
+"""
+
+from __future__ import annotations
+
+import math
+
+HOLD_WAY_MPS = 0.06  # righting the bow: at least this over ground into the current [m/s]
+HOLD_MAX_MPS = 0.1  # ... and never more than this [m/s]
+CREEP_M, CREEP_MPS = 0.12, 0.03  # creep this far upstream (about the goal), this fast at least
+
+
+class CreepCycle:
+    """Call :meth:`speed` each tick of the hold; :meth:`reset` when the hold ends. ``righting_rad``: a heading
+    error this large is righted with way on (until back within half of it); ``gain_per_s``: the station
+    keeper's proportional gain."""
+
+    def __init__(self, righting_rad: float, gain_per_s: float) -> None:
+        self.righting_rad, self.gain = righting_rad, gain_per_s
+        self.righting = False  # the bow off the line: way on until it is back (hysteresis)
+        self.creeping = False  # creeping upstream past the goal (else drifting back onto it)
+        self.backing = False  # righting took the boat CREEP_M past the goal: drifting back onto it first
+
+    def reset(self) -> None:
+        self.righting = self.creeping = self.backing = False
+
+    def speed(self, to_go_m: float, cross_m: float, error_rad: float, bias_mps: float = 0.0) -> float:
+        """The speed over ground into the current [m/s], 0 to drift: ``to_go_m`` how far the goal lies upstream,
+        ``cross_m`` the offset across the line, ``error_rad`` how far the bow is off its LOS heading,
+        ``bias_mps`` the station keeper's integral term along the way into the current."""
+        # the bow off the line: way on until it is back within half the turn threshold (short bursts of way, the
+        # boat drifting back between them, leave the bow where it was: the rudder's force grows with the
+        # square of the water's speed past it)
+        self.righting = error_rad > (0.5 * self.righting_rad if self.righting else self.righting_rad)
+        # a cycle about the goal, each creep long enough for the rudder to act (bursts of way at the goal, the boat
+        # drifting back between them, steer it hardly at all)
+        if to_go_m >= 0.5 * CREEP_M:
+            self.creeping = True
+        elif to_go_m < -0.5 * CREEP_M:
+            self.creeping = False
+        # righting costs about R times the angle in way (0.3 m for 15 deg ahead; astern, where the rudder is weak,
+        # the bow did not come back): it ran the boat 0.3 m upstream and beyond reacquire_radius_m (holds of p95
+        # 0.30-0.32 m astern in uniform currents; ahead, a drift-off whose capture then ran 0.45 m past the goal).
+        # CREEP_M past the goal the boat drifts back instead, and rights the bow further on the next creep
+        self.backing = self.righting and (to_go_m < -CREEP_M or (self.backing and not self.creeping))
+        if self.backing or not (self.creeping or self.righting):
+            # drifting back: speed 0, the current carries the boat (not while the bow is off the line: drifting,
+            # no water passes the rudder, and the bow would stay off)
+            return 0.0
+        s = self.gain * math.hypot(max(to_go_m, 0.0), cross_m) + bias_mps
+        # slowing to the creep's end: coasting on from the offset's speed, boats ran 0.11-0.14 m past the goal
+        s = min(s, CREEP_MPS + self.gain * max(to_go_m + 0.5 * CREEP_M, 0.0))
+        s = max(s, HOLD_WAY_MPS if self.righting else CREEP_MPS)  # the current's flow past the rudder and more
+        return min(HOLD_MAX_MPS, s)
