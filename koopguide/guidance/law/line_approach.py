@@ -326,9 +326,10 @@ class LineApproach:
         zone = CAPTURE_LEAVE_M if self.capture.active else CAPTURE_M  # hysteresis: no chatter with the planner
         if math.hypot(along, cross) <= zone:  # the last decimetres onto the line: a search over manoeuvres
             self.path.reset()
-            # within CAPTURE_M the current at the boat is near the goal's, even where the line does not follow it: a
-            # model boat in still water there, the vortex's 0.025 m/s across a still-water line set the real one off
-            # it on every capture (rudder, vortex: 7.4% of 108 runs did not arrive; drifting on it, 3.7%, stop 32)
+            # within CAPTURE_M the current at the boat is near the goal's, even where the line does not follow it
+            # (self.drift, Helm._on_line): a model boat in still water there, the vortex's 0.025 m/s across a
+            # still-water line set the real one off it on every capture (rudder, vortex seeds 37-43: 236/252
+            # arrived; drifting on it, 241/252, stop 32)
             goal, c = np.asarray(goal_ned, dtype=float), self.drift
             return self.capture.command(t, p, goal, heading_rad, water_mps, self.axis_rad, c, radius_m, outside)
         self.capture.reset()
