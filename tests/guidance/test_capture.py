@@ -243,3 +243,30 @@ def test_onto_a_still_water_line_across_the_current_the_search_drifts_its_model_
     drifting, still = outcomes
     assert drifting is not None and drifting < 15.0, outcomes
     assert still is None or still > drifting, outcomes
+
+
+@pytest.mark.parametrize("toward_deg", [0.0, 90.0, 180.0, 270.0])
+def test_the_hold_takes_on_no_boat_that_would_creep_away_from_its_line(toward_deg: float) -> None:
+    """In a current the hold turns the bow only while it creeps upstream (ahead with the bow upstream, astern with
+    it downstream): a boat 5 cm beside the line whose creep would carry it farther off is left to the capture
+    search; turned toward the line, or on it, it is taken on. From every side, ahead and astern."""
+    from koopguide.guidance.law.line_approach import ENTRY_AWAY_RAD, LineApproach
+
+    toward = math.radians(toward_deg)
+    current = 0.03 * unit(toward)
+    for bow, creep in ((wrap_pi(toward + math.pi), 1.0), (wrap_pi(toward), -1.0)):  # bow upstream: ahead
+        a = unit(bow)
+        right = np.array([-a[1], a[0]])
+        taken = {}
+        for cross, turn_deg in ((0.05, 4.8), (0.05, -4.8), (-0.05, 4.8), (-0.05, -4.8), (0.01, 4.8), (0.01, -4.8)):
+            line = LineApproach(0.3, 0.5, 0.075, 0.15, 0.25)
+            heading = wrap_pi(bow + math.radians(turn_deg))
+            p = cross * right - 0.05 * creep * a  # just downstream of the goal
+            line.aim(p, np.zeros(2), heading, current)
+            assert line.axis_rad == pytest.approx(bow)
+            line.command(p, np.zeros(2), heading, 1.3, current, t=0.0, arrived=False)
+            taken[(cross, turn_deg)] = line.holding
+        # creeping along its heading (astern: its reverse), the boat moves across the line toward its side
+        away = {k: creep * math.copysign(1.0, k[0]) * k[1] > math.degrees(ENTRY_AWAY_RAD) for k in taken}
+        assert taken == {k: not away[k] or abs(k[0]) <= 0.02 for k in taken}, (bow, taken)
+        assert sum(not v for v in taken.values()) == 2

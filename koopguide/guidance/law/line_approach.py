@@ -71,6 +71,7 @@ LEASH_M = 0.3  # while turning (a K-turn): the boat goes on this far past the go
 TURNING_RAD = math.radians(20.0)  # a heading error this large is a turn: keep way on
 K_TURN_RAD = math.radians(45.0)  # ... and this large a K-turn about the goal
 LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.4, math.radians(60.0), 0.8  # ... until beyond these: a planned approach
+ENTRY_AWAY_RAD, ENTRY_SIDE_M = math.radians(4.0), 0.02  # a boat this far off its line: creeping this little away
 UNARRIVED_LEAVE_CROSS_M = 0.15  # ... or, not yet arrived, beyond this across: the capture search (law/capture.py)
 UNARRIVED_LEAVE_RAD = math.radians(15.0)  # ... or facing off a current's line by this much (it turned under the bow)
 REPLAN_OFF_LINE_RAD = math.radians(20.0)  # a path whose end is this far off the current's line is planned again
@@ -314,6 +315,12 @@ class LineApproach:
             # (holds of 0.3-0.7 m p95 in one uniform run in 25); held astern, tighter still (capture.entry_rad)
             entry = entry_rad(self.axis_rad, current_ned if self.in_current else None)
             near = abs(cross) <= ENTRY_CROSS_M and facing <= entry and abs(along) <= HOLD_ALONG_M
+            if near and self.in_current and current_ned is not None and abs(cross) > ENTRY_SIDE_M:
+                # nor a boat that would creep away from the line: the hold turns the bow only as it creeps upstream
+                # (ahead, or astern with the bow downstream), which first carried the boat farther off (4 of 4
+                # takes-on traced at the default campaign's rudder start 5 toward S: 9-10 deg away; 0.08-0.19 m p95)
+                creep = -1.0 if float(unit(self.axis_rad) @ np.asarray(current_ned, dtype=float)) > 0.0 else 1.0
+                near = creep * wrap_pi(heading_rad - self.axis_rad) * math.copysign(1.0, cross) <= ENTRY_AWAY_RAD
             if near and self.path.active:  # a planned path is driven to its end first (its last leg lines the bow up)
                 m = self.path.command(t, p, heading_rad, current_ned)
                 if m is not None:
