@@ -15,7 +15,7 @@ import itertools
 import math
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,7 @@ from koopguide.harness.mission import demo_start_pose, free_udp_port, tank_aroun
 FLEET_SETTLE_S = 15.0  # simulated seconds watched after the last boat arrived
 SLOT_ROOM_M = 0.5  # the tank reaches at least this far beyond each slot, plus tank_around's margin [m]
 FLEET_MAX_SPEEDUP = 4.0  # the demo runs the simulator at most this fast: two services share the machine
+LOOP_SLEEP_S = 0.02  # the watcher's sleep between looks at the services [wall s]
 
 
 @dataclass
@@ -46,6 +47,10 @@ class BoatResult:
 class FleetResult:
     boats: list[BoatResult]
     min_separation_m: float  # smallest true distance between any two boats at any record [m]
+    # the furthest the run fell behind its pace after the first setpoint [simulated s]: the simulator's own lag,
+    # or a stall of the services' event loop (wall seconds beyond its sleep, times the speed-up), whichever is
+    # larger; past mission.pace_limit_s the services held for want of positions because the machine was busy
+    behind_max_s: float = 0.0
 
     def all_within(self, radius_m: float) -> bool:
         return all(b.arrival_time_s is not None and b.slot_error_m <= radius_m for b in self.boats)
@@ -175,18 +180,25 @@ async def fly_fleet(
     arrived: dict[str, float] = {}
     seen_active: set[str] = set()
     t_start = all_in = None
+    loop_behind_s = behind_s = 0.0
     try:
         for cfg, zc in zip(cfgs, zenoh_configs, strict=True):
             daemons.append(await GuidanceDaemon.create(cfg, model, zc))
             runners.append(asyncio.create_task(daemons[-1].run()))
-        with SimulationThread(sim_cfg, records):
+        with SimulationThread(sim_cfg, records) as sim:
             last_print = -math.inf
             wall_guard = time.monotonic() + 15.0 + 3.0 * (timeout_s + settle_s) / max(sim_cfg.speedup, 0.5)
+            woke = time.monotonic()
             while time.monotonic() < wall_guard and not any(r.done() for r in runners):
-                await asyncio.sleep(0.02)
+                await asyncio.sleep(LOOP_SLEEP_S)
                 t = daemons[0].clock.now()
+                if t_start is not None:  # the services share this loop: a late wake-up is a stall of theirs too
+                    stall_s = max(0.0, time.monotonic() - woke - LOOP_SLEEP_S) * sim_cfg.speedup
+                    loop_behind_s = max(loop_behind_s, stall_s)
+                woke = time.monotonic()
                 if t_start is None and all(d.setpoints_sent > 0 for d in daemons):
                     t_start = t
+                    sim.call(lambda s: s.reset_pace())  # the pace counts from the first setpoints
                 for d in daemons:
                     if d.arrived and d.cfg.vehicle_id not in arrived:
                         arrived[d.cfg.vehicle_id] = d.clock.now()
@@ -201,11 +213,12 @@ async def fly_fleet(
                 all_in = (all_in if all_in is not None else t) if together else None
                 if all_in is not None and t - all_in >= settle_s:
                     break
+            behind_s = max(loop_behind_s, sim.behind_max_s)
     finally:
         for d in daemons:
             d.stop()
         await asyncio.gather(*runners, return_exceptions=True)
-    return summarize_fleet(daemons, records, t_start, arrived, seen_active)
+    return replace(summarize_fleet(daemons, records, t_start, arrived, seen_active), behind_max_s=behind_s)
 
 
 def summarize_fleet(

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import socket
+import time
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ import pytest
 from koopguide.base import data
 from koopguide.bus.zenoh_config import default_zenoh_config
 from koopguide.harness import fleet_demo
+from koopguide.harness.mission import pace_limit_s
 
 SPEEDUP = 3.0
 
@@ -47,3 +49,35 @@ def test_two_services_on_crossing_courses_keep_separation_and_reach_their_slots(
     assert any(b.separation_seen for b in result.boats)  # the courses crossed: the filter had to act
     slots = np.array([b.slot_ned for b in result.boats])
     assert np.linalg.norm(slots[0] - slots[1]) == pytest.approx(cfgs[0].fleet.slot_separation_m)
+
+
+async def fly_with_stalls(cfgs: list, model: Path, sim_cfg: object, stall_s: float) -> fleet_demo.FleetResult:
+    """A short fleet run while, every 1.5 s of wall clock, something holds the services' event loop for
+    ``stall_s`` (a busy machine: 0 is no stall)."""
+
+    async def stalls() -> None:
+        while True:
+            await asyncio.sleep(1.5)
+            time.sleep(stall_s)  # noqa: ASYNC251 -- blocking the loop is the point
+
+    stall = asyncio.create_task(stalls())
+    port = free_tcp_port()
+    try:
+        return await fleet_demo.fly_fleet(cfgs, model, sim_cfg, 6.0, [default_zenoh_config(port)] * 2, settle_s=1.0)
+    finally:
+        stall.cancel()
+
+
+@pytest.mark.timeout(120)
+def test_a_fleet_run_whose_services_were_starved_reads_as_behind_its_pace(zshape_model: Path) -> None:
+    """The encounter harness flies a run again slower when it fell behind its pace (fleet_encounters.fly): a stall
+    of the loop the services run on must show in ``behind_max_s`` (wall stall x speed-up), a free run must not."""
+    start = data.load_lasa("Zshape").trajectories[0][0]
+    cfgs, sim_cfg, _ = fleet_demo.fleet_setup(zshape_model, [start, start], SPEEDUP, [90.0, 270.0], crossing=True)
+    limit_s = pace_limit_s(cfgs[0])
+    free = asyncio.run(fly_with_stalls(cfgs, zshape_model, sim_cfg, 0.0))
+    cfgs, sim_cfg, _ = fleet_demo.fleet_setup(zshape_model, [start, start], SPEEDUP, [90.0, 270.0], crossing=True)
+    starved = asyncio.run(fly_with_stalls(cfgs, zshape_model, sim_cfg, 0.4))
+    print(f"behind its pace: free {free.behind_max_s:.3f} s, starved {starved.behind_max_s:.3f} s (limit {limit_s} s)")
+    assert free.behind_max_s <= limit_s, free.behind_max_s
+    assert starved.behind_max_s >= 0.9 * 0.4 * SPEEDUP > limit_s, starved.behind_max_s

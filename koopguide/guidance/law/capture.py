@@ -67,12 +67,17 @@ AREA_COST_PER_M = 200.0  # each metre out of the area the boat may use
 MANEUVERS: tuple[tuple[int, int], ...] = (*itertools.product((1, -1), (-1, 0, 1)), (0, 0))
 
 
+def bow_downstream(axis_rad: float, current_ned: np.ndarray | None) -> bool:
+    """Whether a boat facing ``axis_rad`` [rad] has its bow downstream in the current ``current_ned`` [m/s, NED]
+    (None: still water, never): it then holds astern, creeping upstream stern first."""
+    return current_ned is not None and float(unit(axis_rad) @ np.asarray(current_ned, dtype=float)) > 0.0
+
+
 def entry_rad(axis_rad: float, current_ned: np.ndarray | None) -> float:
     """How well a boat must face along its line (bow direction ``axis_rad``) for the hold to take it on:
     ``ENTRY_ASTERN_RAD`` with the bow downstream in the current ``current_ned`` (None: still water), else
     ``ENTRY_RAD``."""
-    downstream = current_ned is not None and float(unit(axis_rad) @ np.asarray(current_ned, dtype=float)) > 0.0
-    return ENTRY_ASTERN_RAD if downstream else ENTRY_RAD
+    return ENTRY_ASTERN_RAD if bow_downstream(axis_rad, current_ned) else ENTRY_RAD
 
 
 class CaptureSearch:

@@ -58,7 +58,14 @@ from collections.abc import Callable
 import numpy as np
 
 from koopguide.guidance.law.approach_path import HOLD_ALONG_M, ApproachPath
-from koopguide.guidance.law.capture import CAPTURE_LEAVE_M, CAPTURE_M, ENTRY_CROSS_M, CaptureSearch, entry_rad
+from koopguide.guidance.law.capture import (
+    CAPTURE_LEAVE_M,
+    CAPTURE_M,
+    ENTRY_CROSS_M,
+    CaptureSearch,
+    bow_downstream,
+    entry_rad,
+)
 from koopguide.guidance.law.creep_cycle import CreepCycle
 from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, capped, unit, wrap_pi
 
@@ -272,7 +279,7 @@ class LineApproach:
         downstream), by the creep cycle about the goal (law/creep_cycle.py), steering by LOS onto the line."""
         c = np.asarray(current_ned, dtype=float)
         up = -c / float(np.hypot(*c))
-        self.travel = 1.0 if float(a @ up) > 0.0 else -1.0
+        self.travel = -1.0 if bow_downstream(self.axis_rad, c) else 1.0
         self.astern = self.travel < 0
         heading = self._heading(self.travel, delta, a, n, cross)
         to_go = float((np.asarray(goal_ned, dtype=float) - p) @ up)  # how far the goal lies upstream [m]
@@ -319,7 +326,7 @@ class LineApproach:
                 # nor a boat that would creep away from the line: the hold turns the bow only as it creeps upstream
                 # (ahead, or astern with the bow downstream), which first carried the boat farther off (4 of 4
                 # takes-on traced at the default campaign's rudder start 5 toward S: 9-10 deg away; 0.08-0.19 m p95)
-                creep = -1.0 if float(unit(self.axis_rad) @ np.asarray(current_ned, dtype=float)) > 0.0 else 1.0
+                creep = -1.0 if bow_downstream(self.axis_rad, current_ned) else 1.0
                 near = creep * wrap_pi(heading_rad - self.axis_rad) * math.copysign(1.0, cross) <= ENTRY_AWAY_RAD
             if near and self.path.active:  # a planned path is driven to its end first (its last leg lines the bow up)
                 m = self.path.command(t, p, heading_rad, current_ned)
