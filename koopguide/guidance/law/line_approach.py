@@ -12,11 +12,10 @@ turn (the autopilot reverses the rudder astern, docs/rover.md). Four modes, one 
   manoeuvres with the rudder over (law/capture.py), the last decimetres onto the line (a path tracked in the
   water on a current that is not the goal's ended off the line there, and LOS feedback shuttled along it);
 * on the line near the goal (taken on within the capture search's ``ENTRY_*`` bounds however the boat got
-  there, left beyond ``LEAVE_*``): feedback; in a current into the current only
-  (law/creep_cycle.py), in still water ahead or astern along the line. A planned path
-  is driven to its end before the hold takes over: its last leg lines the bow up with the line (taken over
-  mid-path, a hold began up to 25 deg off, and turning the bow back with way on carried the boat
-  0.3-0.5 m past the goal);
+  there, left beyond ``LEAVE_*``): feedback; in a current into the current only (law/creep_cycle.py), in still
+  water ahead or astern along the line. A planned path is driven to its end before the hold takes over: its last
+  leg lines the bow up with the line (taken over mid-path, a hold began up to 25 deg off, and turning the bow
+  back with way on carried the boat 0.3-0.5 m past the goal);
 * otherwise (no circle measured yet, or no path fits): line-of-sight guidance onto the line with K-turns,
   reversing before the area's edge, as below.
 
