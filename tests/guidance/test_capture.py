@@ -270,3 +270,19 @@ def test_the_hold_takes_on_no_boat_that_would_creep_away_from_its_line(toward_de
         away = {k: creep * math.copysign(1.0, k[0]) * k[1] > math.degrees(ENTRY_AWAY_RAD) for k in taken}
         assert taken == {k: not away[k] or abs(k[0]) <= 0.02 for k in taken}, (bow, taken)
         assert sum(not v for v in taken.values()) == 2
+
+
+def test_the_capture_search_drifts_on_what_it_is_told_and_on_nothing_when_told_none() -> None:
+    """``LineApproach.aim``'s drift: by default the line's current; None (shear seen at the boat now) is no drift,
+    not "the line's current" (the helm then has no current for the line either, but the two must not be coupled)."""
+    from koopguide.guidance.law.line_approach import LineApproach
+
+    current = np.array([0.02, -0.01])
+    line = LineApproach(0.3, 0.5, 0.075, 0.15, 0.25)
+    line.aim(np.zeros(2), np.zeros(2), 0.0, current)
+    assert line.drift is current
+    line.aim(np.zeros(2), np.zeros(2), 0.0, current, None)
+    assert line.drift is None
+    drift = np.array([0.0, 0.03])
+    line.aim(np.zeros(2), np.zeros(2), 0.0, None, drift)
+    assert line.drift is drift and not line.in_current

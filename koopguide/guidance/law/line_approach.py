@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from types import EllipsisType
 
 import numpy as np
 
@@ -126,15 +127,15 @@ class LineApproach:
         goal_ned: np.ndarray,
         heading_rad: float,
         current_ned: np.ndarray | None,
-        drift_ned: np.ndarray | None = None,
+        drift_ned: np.ndarray | EllipsisType | None = ...,
     ) -> None:
         """Choose the line: along the current (the end nearest the one held, so that the line turns with the current
         in a vortex); in still water the line from the boat to the goal (kept once chosen, until :meth:`reset`).
         The bow's end of the line is the one the boat faces: past 90 deg + ``SWAP_RAD`` off it, the ends swap
         (the way along the line to the goal is kept: ahead and astern swap with them). ``drift_ned``: the current
         estimate at the boat where the line does not follow it (sheared water), which the capture search's model
-        boat still drifts on (default: ``current_ned``)."""
-        self.drift = current_ned if drift_ned is None else drift_ned
+        boat still drifts on; None: it drifts on none; default (``...``): on ``current_ned``."""
+        self.drift = current_ned if drift_ned is ... else drift_ned
         if current_ned is not None:
             upstream = math.atan2(-current_ned[1], -current_ned[0])
             ref = heading_rad if self.axis_rad is None else self.axis_rad
