@@ -131,10 +131,9 @@ class LineApproach:
     ) -> None:
         """Choose the line: along the current (the end nearest the one held, so that the line turns with the current
         in a vortex); in still water the line from the boat to the goal (kept once chosen, until :meth:`reset`).
-        The bow's end of the line is the one the boat faces: past 90 deg + ``SWAP_RAD`` off it, the ends swap
-        (the way along the line to the goal is kept: ahead and astern swap with them). ``drift_ned``: the current
-        estimate at the boat where the line does not follow it (sheared water), which the capture search's model
-        boat still drifts on; None: it drifts on none; default (``...``): on ``current_ned``."""
+        The bow's end of the line is the one the boat faces: past 90 deg + ``SWAP_RAD`` off it, the ends swap (the
+        way to the goal is kept: ahead and astern swap with them). ``drift_ned``: the current the capture search's
+        model boat drifts on where the line does not follow it (sheared water); None: none; default: current_ned."""
         self.drift = current_ned if drift_ned is ... else drift_ned
         if current_ned is not None:
             upstream = math.atan2(-current_ned[1], -current_ned[0])
