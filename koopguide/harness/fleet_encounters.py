@@ -121,32 +121,32 @@ def fly(
     ``mission.pace_limit_s`` (a busy machine: the services held for want of positions, or answered late) says
     nothing about the separation, so it is flown again at half the speed-up; PaceError after ``attempts``."""
     from koopguide.bus.zenoh_config import default_zenoh_config
-    from koopguide.harness.mission import PaceError, pace_limit_s
+    from koopguide.harness.mission import pace_limit_s, slower_until_paced
 
-    lags = []
-    for _ in range(attempts):
-        cfgs, sim_cfg = setup(encounter, model, vehicle, current_mps, speedup)
+    async def at(x: float) -> tuple[fleet_demo.FleetResult, float, float, float]:
+        """(the result, its wall time [s], its speed-up, its pace limit [simulated s])."""
+        cfgs, sim_cfg = setup(encounter, model, vehicle, current_mps, x)
         zc = default_zenoh_config(free_tcp_port()) if zenoh_config is None else zenoh_config
         start = time.monotonic()
-        result = asyncio.run(fleet_demo.fly_fleet(cfgs, model, sim_cfg, timeout_s, [zc] * 2, settle_s=settle_s))
-        if result.behind_max_s <= pace_limit_s(cfgs[0]):
-            return EncounterResult(
-                encounter.name,
-                vehicle,
-                current_mps,
-                result.min_separation_m,
-                tuple(b.slot_error_m for b in result.boats),
-                tuple(b.arrival_time_s for b in result.boats),
-                any(b.separation_seen for b in result.boats),
-                time.monotonic() - start,
-                speedup,
-                result.behind_max_s,
-            )
-        lags.append(f"{result.behind_max_s:.2f} s at x{speedup:g}")
-        print(f"encounter {encounter.name}: fell behind its pace by {lags[-1]}; flying it slower", file=sys.stderr)
-        speedup *= 0.5
-    limit_s = pace_limit_s(cfgs[0])
-    raise PaceError(f"encounter {encounter.name} fell behind its pace by more than {limit_s:.2f} s every time: {lags}")
+        result = await fleet_demo.fly_fleet(cfgs, model, sim_cfg, timeout_s, [zc] * 2, settle_s=settle_s)
+        return result, time.monotonic() - start, x, pace_limit_s(cfgs[0])
+
+    what = f"encounter {encounter.name}"
+    result, wall_s, x, _ = asyncio.run(
+        slower_until_paced(at, lambda r: (r[0].behind_max_s, r[3]), speedup, attempts, what)
+    )
+    return EncounterResult(
+        encounter.name,
+        vehicle,
+        current_mps,
+        result.min_separation_m,
+        tuple(b.slot_error_m for b in result.boats),
+        tuple(b.arrival_time_s for b in result.boats),
+        any(b.separation_seen for b in result.boats),
+        wall_s,
+        x,
+        result.behind_max_s,
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -13,9 +13,10 @@ import math
 import socket
 import sys
 import time
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -23,6 +24,8 @@ from koopguide.guidance.law.command import GuidanceLaw
 from koopguide.guidance.law.frames import ModelFrame
 from koopguide.guidance.settings import GuidanceConfig
 from koopguide.model.field import FlowField
+
+R = TypeVar("R")
 
 TANK_M = (4.5, 3.0)  # the paper's tank, N x E [m]
 DEMO_SETTLE_S = 20.0  # simulated seconds the demo keeps watching after arrival
@@ -161,16 +164,34 @@ async def fly_paced(
     seconds is X p simulated seconds in which the simulator catches up in a burst and the service, rightly,
     holds for want of fresh positions; such a run says nothing about guidance, so it is not counted.
     The verdict depends on the pace only, never on the mission's outcome. PaceError after ``attempts``."""
+
+    async def at(speedup: float) -> MissionResult:
+        return await fly(cfg, model, replace(sim_cfg, speedup=speedup), timeout_s, **kwargs)
+
+    limit_s = pace_limit_s(cfg)
+    return await slower_until_paced(at, lambda r: (r.sim_behind_max_s, limit_s), sim_cfg.speedup, attempts, "mission")
+
+
+async def slower_until_paced(
+    fly_at: Callable[[float], Awaitable[R]],
+    pace: Callable[[R], tuple[float, float]],
+    speedup: float,
+    attempts: int,
+    what: str,
+) -> R:
+    """``fly_at(speedup)``, flown again at half the speed-up while its result fell behind its pace by more than
+    it may: ``pace(result)`` is (how far it fell behind, the limit: :func:`pace_limit_s`) in simulated seconds.
+    PaceError after ``attempts``."""
     lags = []
     for _ in range(attempts):
-        result = await fly(cfg, model, sim_cfg, timeout_s, **kwargs)
-        if result.paced(cfg):
+        result = await fly_at(speedup)
+        behind_s, limit_s = pace(result)
+        if behind_s <= limit_s:
             return result
-        lags.append(f"{result.sim_behind_max_s:.2f} s at x{sim_cfg.speedup:g}")
-        print(f"mission: simulator fell behind its pace by {lags[-1]}; flying it again slower", file=sys.stderr)
-        sim_cfg = replace(sim_cfg, speedup=0.5 * sim_cfg.speedup)
-    limit_s = pace_limit_s(cfg)
-    raise PaceError(f"the simulator fell behind its pace by more than {limit_s:.2f} s in every attempt: {lags}")
+        lags.append(f"{behind_s:.2f} s at x{speedup:g}")
+        print(f"{what}: fell behind its pace by {lags[-1]}; flying it again slower", file=sys.stderr)
+        speedup *= 0.5
+    raise PaceError(f"{what} fell behind its pace by more than {limit_s:.2f} s in every attempt: {lags}")
 
 
 def summarize(
