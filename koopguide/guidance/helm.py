@@ -35,6 +35,7 @@ PROBE_DOING = {
 LINE_CURRENT_SIGMAS = 2.0  # a current estimate this many of its standard deviations strong sets the holding line
 LINE_DOING = "making for the line it can hold the goal on"  # near the goal, a boat that needs way, off its line
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
+LINE_LEAVE = 1.25  # ... and goes back to following the field only beyond this many times that distance
 SHEARED_WEIGHT = 0.5  # the current estimator's shear weight beyond which the water is sheared (estimation/current.py)
 EDGE_INSET_M = 0.05  # a boat this close to the area's edge (a tank's wall, a bank) slips by it, not the current [m]
 Command = tuple[np.ndarray, float | None]  # (velocity NED [m/s], yaw [rad] or None for velocity only)
@@ -145,9 +146,13 @@ class Helm:
         current_ned: np.ndarray | None,
         current_std_mps: float = 0.0,
         shear_weight: float = 0.0,
+        at_edge: bool = False,
     ) -> None:
         """The boat's heading, turn rate, ground velocity and the estimated current (and its spread, and how much
-        shear its estimator sees: ``CurrentEstimator.shear_weight``) at vehicle time ``t``."""
+        shear its estimator sees: ``CurrentEstimator.shear_weight``) at vehicle time ``t``. ``at_edge``: the boat
+        is at the area's edge (:meth:`at_edge`), where a wall may turn it: how it turns is not learned there (a
+        rudder boat of a 2.4 m circle set onto a tank's wall turned on it as if on a 0.8 m one, and the approach
+        planned on that circle backed and filled by the wall for a minute, stop 35)."""
         self.t, self.current_std = t, current_std_mps
         self.shearing = shear_weight > SHEARED_WEIGHT  # the estimator sees shear now
         self.sheared = self.sheared or self.shearing
@@ -158,6 +163,8 @@ class Helm:
         water = np.asarray(velocity_ned, dtype=float) - (0.0 if current_ned is None else np.asarray(current_ned))
         u = float(water[0] * math.cos(heading_rad) + water[1] * math.sin(heading_rad))
         self.water_mps = u
+        if at_edge:
+            return
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
         self.ability.update(t, asked, u, turn_rate_radps)
 
@@ -190,9 +197,14 @@ class Helm:
 
     def line_radius_m(self) -> float:
         """Within this distance of the goal a boat that needs way makes for the line it will hold (twice its
-        turning radius: it has room to turn onto the line), and at least within the capture radius."""
+        turning radius: it has room to turn onto the line), and at least within the capture radius; once it does,
+        ``LINE_LEAVE`` times as far (without the hysteresis a boat about that distance out, whose approach path
+        begins with a leg astern, crossed it to and fro: every crossing dropped the path and the next one planned
+        another, and a rudder boat that slips more than the simulator's (Y_v -3 kg/s) backed and filled 2 m out
+        for 18 s, Zshape demo start 3 in a current toward the west, stop 35)."""
         radius = self.ability.radius_m if self.ability.radius_m is not None else DEFAULT_RADIUS_M
-        return max(self.cfg.arrival.capture_radius_m, LINE_RADII * radius if self.ability.needs_way else 0.0)
+        making = LINE_LEAVE if self.line.axis_rad is not None else 1.0  # making for the line already
+        return max(self.cfg.arrival.capture_radius_m, making * LINE_RADII * radius if self.ability.needs_way else 0.0)
 
     def near(
         self,

@@ -247,7 +247,8 @@ class Supervisor:
         estimator = self.vehicle.current
         current = estimator.current_ned if heading is not None and estimator.updates else None
         rate = self.vehicle.attitude[2] if heading is not None and self.vehicle.attitude else None
-        self.helm.observe(now, heading, rate, v_est, current, estimator.seen_std_mps, estimator.shear_weight)
+        edge = self.helm.at_edge(p)
+        self.helm.observe(now, heading, rate, v_est, current, estimator.seen_std_mps, estimator.shear_weight, edge)
         self.helm.in_company = self.cfg.fleet.enabled and bool(self.neighbours.latest)
         distance = law.distance_to_goal(p)
         if self.arrived:

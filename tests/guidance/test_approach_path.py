@@ -384,3 +384,53 @@ def test_a_tracked_path_never_asks_more_than_max_speed_over_ground_in_a_current_
     assert m is None or abs(m.speed_mps) <= 0.3 + 1e-12
     if m is not None and k + 3 < len(path.samples) and c < 0.04:
         assert abs(m.speed_mps) > 0.0  # ... yet it moves
+
+
+def test_a_boat_making_for_its_holding_line_keeps_at_it_until_well_beyond_where_it_began(law: GuidanceLaw) -> None:
+    """A rudder boat (1 m circle) makes for its line from two turning radii out; it goes back to following the
+    field only beyond ``LINE_LEAVE`` times that. Without the hysteresis a boat whose approach path began with a leg
+    astern crossed the 2 m circle to and fro, planning a new path at every crossing (stop 35)."""
+    from koopguide.guidance.helm import LINE_LEAVE, LINE_RADII, Helm
+
+    cfg = guidance_settings.load()
+    helm = Helm(cfg, law)
+    helm.ability.needs_way, helm.ability.radius_m = True, 1.0
+    out = unit(math.atan2(-1.38, 1.78))  # from the goal toward a demo start, inside the area
+    heading = math.atan2(-out[1], -out[0])  # facing the goal
+    helm.observe(0.0, heading, 0.0, np.zeros(2), None)
+
+    def follow(distance: float) -> None:
+        p = distance * out
+        sp = law.decide(p, False, heading, None)
+        assert law.outside_area(p) == 0.0 and sp.ground_ned is not None
+        helm.follow(p, sp, heading, None, distance)
+
+    follow(LINE_RADII * 1.0 + 0.2)  # beyond two radii: following the field
+    assert helm.line.axis_rad is None and helm.line_radius_m() == pytest.approx(LINE_RADII)
+    follow(LINE_RADII * 1.0 - 0.1)  # within: making for the line
+    assert helm.line.axis_rad is not None and helm.line_radius_m() == pytest.approx(LINE_LEAVE * LINE_RADII)
+    follow(LINE_RADII * 1.0 + 0.2)  # back beyond two radii: still making for it
+    assert helm.line.axis_rad is not None
+    follow(LINE_LEAVE * LINE_RADII * 1.0 + 0.1)  # beyond the hysteresis: following the field again
+    assert helm.line.axis_rad is None
+
+
+def test_a_turn_at_the_area_edge_does_not_teach_the_helm_how_the_boat_turns(law: GuidanceLaw) -> None:
+    """A hard turn at 0.15 m/s, 12 deg/s (a 0.7 m circle) seen while the boat is at the area's edge, where a wall
+    may be turning it, is no reading of its turning circle; the same turn away from the edge is (stop 35)."""
+    from koopguide.guidance.helm import Helm
+
+    cfg = guidance_settings.load()
+    u, rate, asked = 0.15, math.radians(12.0), math.radians(90.0)
+    readings = {}
+    for at_edge in (True, False):
+        helm = Helm(cfg, law)
+        helm.ability.needs_way = True
+        heading = 0.0
+        for k in range(60):  # 3 s of a hard turn asked 90 deg off
+            heading = wrap_pi(heading + rate * 0.05)
+            helm.asked_heading = wrap_pi(heading + asked)
+            helm.observe(0.05 * k, heading, rate, u * unit(heading), None, at_edge=at_edge)
+        readings[at_edge] = helm.ability.radius_m
+    assert readings[True] is None
+    assert readings[False] == pytest.approx(u / rate, rel=0.05)
