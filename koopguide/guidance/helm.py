@@ -313,7 +313,7 @@ class Helm:
         # the goal's), except while shear is seen there and then: the double gyre's current by the goal turns round
         # every 10 s (drifting on it anyway, gyre seeds 31-32 arrived 65 and 62 of 72 times, against 69 without)
         drift, c = (None if self.shearing else c), (None if self.sheared else c)
-        self.line.aim(p_ned, self.law.goal_ned, heading_rad, c, drift)
+        self.line.aim(p_ned, self.law.goal_ned, heading_rad, c, drift, self.t if self.arrived else None)
         m = self.line.command(
             p_ned,
             self.law.goal_ned,

@@ -330,3 +330,31 @@ def test_a_reversal_at_the_area_edge_keeps_its_new_way_for_a_leg_so_the_bow_can_
     for east in (-0.65, -0.75, -0.6 - EDGE_LEG_M + 0.02):  # backing away, the leg goes on
         assert at(line, east).astern, east
     assert not at(line, -0.6 - EDGE_LEG_M - 0.02).astern  # the leg driven: ahead again
+
+
+@pytest.mark.parametrize("holding", [False, True])
+def test_a_held_current_line_turns_slowly_toward_the_estimate_and_a_line_not_held_at_once(holding: bool) -> None:
+    """The current's line is held only in water not seen to be sheared, where the current is steady: an estimate
+    whose direction swings by 20 deg for 2 s (the hull's own sway read as current) turns a held line by about 2 deg;
+    a swing that lasts turns it all the way within a few AXIS_TAU_S. A line not yet held follows the estimate at
+    once (stop 35)."""
+    from koopguide.guidance.law.line_approach import AXIS_TAU_S
+
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.15)
+    goal, p = np.zeros(2), np.array([0.02, 0.0])
+    north = np.array([0.03, 0.0])  # toward north: the bow upstream faces south
+    line.aim(p, goal, math.pi, north, t=0.0)
+    assert abs(wrap_pi(line.axis_rad - math.pi)) < 1e-9
+    line.holding = holding
+    swung = 0.03 * np.array([math.cos(math.radians(20.0)), math.sin(math.radians(20.0))])
+    upstream = math.atan2(-swung[1], -swung[0])  # -160 deg
+    for k in range(1, 21):  # 2 s of the swung estimate
+        line.aim(p, goal, math.pi, swung, t=0.1 * k)
+    turned = abs(wrap_pi(line.axis_rad - math.pi))
+    if not holding:
+        assert abs(wrap_pi(line.axis_rad - upstream)) < 1e-9
+        return
+    assert turned == pytest.approx(math.radians(20.0) * (1.0 - math.exp(-2.0 / AXIS_TAU_S)), rel=0.05)
+    for k in range(21, round(5.0 * AXIS_TAU_S / 0.1)):  # it lasts: the line follows it
+        line.aim(p, goal, math.pi, swung, t=0.1 * k)
+    assert abs(wrap_pi(line.axis_rad - upstream)) < math.radians(0.2)
