@@ -1,13 +1,13 @@
 """The helm: from the ground velocity the guidance wants to the setpoint that gets this boat there (pure).
 
-Following the field, a boat that turns in place gets the law's velocity-only setpoint (crabbed into the current
-and slowed to turn, law/command.py). Near a point (within the capture radius, keeping station, pursuing the
-goal directly), and everywhere for a boat seen to need way through the water to turn, it gets a
-heading-and-speed setpoint, ahead or astern (law/maneuver.py): that is what lets a skid-steer boat back onto a
-goal behind it instead of circling it, and a rudder boat keep the way its rudder needs. How the boat turns is
-learned from its telemetry (estimation/turning.py). In water the current estimator has seen to be sheared
-(``SHEARED_WEIGHT``) a boat that needs way holds the still-water line near the goal: the current at the boat
-is no guide to the goal's there. See docs/guidance.md "Any boat".
+Following the field, a boat that turns in place gets the law's velocity-only setpoint (crabbed into the current and
+slowed to turn, law/command.py). Near a point (within the capture radius, keeping station, pursuing the goal
+directly), and everywhere for a boat seen to need way through the water to turn, it gets a heading-and-speed
+setpoint, ahead or astern (law/maneuver.py): that is what lets a skid-steer boat back onto a goal behind it instead
+of circling it, and a rudder boat keep the way its rudder needs. How the boat turns, and how far it runs on when
+told to stop, are learned from its telemetry (estimation/turning.py, estimation/stopping.py). In water the current
+estimator has seen to be sheared (``SHEARED_WEIGHT``) a boat that needs way holds the still-water line near the
+goal: the current at the boat is no guide to the goal's there. See docs/guidance.md "Any boat".
 
 Conventions: NED velocities ``(2,)`` [m/s], headings [rad] from north, turn rates [rad/s], vehicle seconds.
 """
@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from koopguide.guidance.estimation.stopping import StoppingTime
 from koopguide.guidance.estimation.turning import TurnAbility
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, CURRENT_MIN_MPS, GuidanceLaw, GuidanceState, Setpoint
 from koopguide.guidance.law.line_approach import DEFAULT_RADIUS_M, LineApproach
@@ -28,10 +29,12 @@ PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.
 PROBE_MOVED_RAD = math.radians(10.0)  # the heading moved this much in the probe: the boat turns in place
 PROBE_WAY_RAD = math.radians(90.0)  # ... and the turn under way asked of a boat that needs way, for its circle
 PROBE_CIRCLE_M = 1.5  # ... to the side where a circle this wide stays more inside the area [m]
+PROBE_STOP_S = 2.5  # ... and then a stop under way asked of it, for how far it runs on (estimation/stopping.py) [s]
 PROBE_DOING = {
     False: "asking a turn in place to tell how the boat turns",
     True: "asking a hard turn under way to measure its turning circle",
 }
+PROBE_STOP_DOING = "asking a stop under way to measure how far it runs on"
 LINE_CURRENT_SIGMAS = 2.0  # a current estimate this many of its standard deviations strong sets the holding line
 LINE_DOING = "making for the line it can hold the goal on"  # near the goal, a boat that needs way, off its line
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
@@ -47,6 +50,7 @@ class Helm:
     def __init__(self, cfg: GuidanceConfig, law: GuidanceLaw) -> None:
         self.cfg, self.law = cfg, law
         self.ability = TurnAbility()
+        self.stopping = StoppingTime()  # how far the boat runs on when told to stop
         self.planner = ManeuverPlanner(cfg.command.max_speed_mps, cfg.command.turn_speed_mps)
         self.line = LineApproach(
             cfg.command.max_speed_mps,
@@ -65,8 +69,10 @@ class Helm:
         self.probe_heading: float | None = None  # the heading it asks [rad]
         self.probe_from: float | None = None  # the heading when it began [rad]
         self.probe_with_way = False  # the probe's second stage (a boat that needs way: a hard turn under way)
+        self.probe_stop_until: float | None = None  # ... its third, a stop under way: until this vehicle time [s]
         self.doing = "following the field"  # what the last command did (for the status's reason)
         self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
+        self.stop_asked = False  # the last setpoint that went out asked speed 0 (:meth:`sent`)
         # other boats are heard (fleet): following the field and a boat that needs way go velocity-only, as the
         # separation filter expects; a boat that turns in place keeps its ahead-or-astern maneuver near a point
         self.in_company = False
@@ -74,8 +80,8 @@ class Helm:
 
     def reset(self) -> None:
         """A restarted vehicle (maybe another boat): forget how it turns."""
-        self.ability = TurnAbility()
-        self.probe_until = self.probe_heading = None
+        self.ability, self.stopping = TurnAbility(), StoppingTime()
+        self.probe_until = self.probe_heading = self.probe_stop_until = None
         self.probe_with_way = False
         self.planner.reset()
         self.line.reset()
@@ -89,8 +95,11 @@ class Helm:
         again, which measures its turning circle, to the side whose circle stays more inside the area
         (``p_ned``: the boat's position; None: to starboard). The whole turn: the circle is the tightest seen in
         it, and the first reading (1.5 s in, the turn still tightening) was 2-9 m against the rudder boat's
-        1.1-1.5 m; the plans and the look-ahead kept it until the next hard turn at manoeuvring speed. None once
-        done (or off, or no heading known)."""
+        1.1-1.5 m; the plans and the look-ahead kept it until the next hard turn at manoeuvring speed. Then, with
+        the way that turn gave it, speed 0 at its heading for ``PROBE_STOP_S``: how far it runs on (a hull of twice
+        the mass with a weak astern ran 0.2 m past the goal on ramps made for the simulator's, and nothing else
+        tells the service before the boat is first stopped, at the goal). None once done (or off, or no heading
+        known)."""
         a = self.ability
         if heading_rad is None or a.pivot_seen:
             return None
@@ -110,7 +119,12 @@ class Helm:
             self.probe_until = t + self.cfg.command.probe_turn_s
             self.probe_heading = wrap_pi(heading_rad + self._probe_side(heading_rad, p_ned) * PROBE_WAY_RAD)
         if t >= self.probe_until:
-            return None
+            if self.probe_stop_until is None:
+                self.probe_stop_until, self.probe_heading = t + PROBE_STOP_S, heading_rad
+            if t >= self.probe_stop_until:
+                return None
+            self.asked_heading = self.probe_heading
+            return np.zeros(2), self.probe_heading  # Rover's stop controller, holding the heading
         self.asked_heading = self.probe_heading  # ahead, velocity only: Rover steers to its direction at its speed
         v = self.cfg.command.turn_speed_mps * unit(self.probe_heading)
         return v, None
@@ -150,9 +164,9 @@ class Helm:
     ) -> None:
         """The boat's heading, turn rate, ground velocity and the estimated current (and its spread, and how much
         shear its estimator sees: ``CurrentEstimator.shear_weight``) at vehicle time ``t``. ``at_edge``: the boat
-        is at the area's edge (:meth:`at_edge`), where a wall may turn it: how it turns is not learned there (a
-        rudder boat of a 2.4 m circle set onto a tank's wall turned on it as if on a 0.8 m one, and the approach
-        planned on that circle backed and filled by the wall for a minute, stop 35)."""
+        is at the area's edge (:meth:`at_edge`), where a wall may turn or stop it: how it turns and stops is not
+        learned there (a rudder boat of a 2.4 m circle set onto a tank's wall turned on it as if on a 0.8 m one,
+        and the approach planned on that circle backed and filled by the wall for a minute, stop 35)."""
         self.t, self.current_std = t, current_std_mps
         self.shearing = shear_weight > SHEARED_WEIGHT  # the estimator sees shear now
         self.sheared = self.sheared or self.shearing
@@ -163,6 +177,7 @@ class Helm:
         water = np.asarray(velocity_ned, dtype=float) - (0.0 if current_ned is None else np.asarray(current_ned))
         u = float(water[0] * math.cos(heading_rad) + water[1] * math.sin(heading_rad))
         self.water_mps = u
+        self.stopping.update(t, self.stop_asked and not at_edge, u)  # a wall stops a boat too
         if at_edge:
             return
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
@@ -275,7 +290,14 @@ class Helm:
         if not within and (sp.state is not GuidanceState.GUIDING or sp.ground_ned is None):
             return np.asarray(sp.velocity_ned, dtype=float), None
         probe = self.probe(self.t, heading_rad, p_ned) if self.t is not None else None
-        self.doing = "following the field" if probe is None else PROBE_DOING[self.probe_with_way]
+        stopping = self.probe_stop_until is not None
+        self.doing = (
+            "following the field"
+            if probe is None
+            else PROBE_STOP_DOING
+            if stopping
+            else PROBE_DOING[self.probe_with_way]
+        )
         if probe is not None:
             return probe
         if within:
@@ -314,6 +336,7 @@ class Helm:
         # every 10 s (drifting on it anyway, gyre seeds 31-32 arrived 65 and 62 of 72 times, against 69 without)
         drift, c = (None if self.shearing else c), (None if self.sheared else c)
         self.line.aim(p_ned, self.law.goal_ned, heading_rad, c, drift, self.t if self.arrived else None)
+        self.line.stop_s = self.stopping.tau_s
         m = self.line.command(
             p_ned,
             self.law.goal_ned,
@@ -328,6 +351,11 @@ class Helm:
             arrived=self.arrived,
         )
         return self._maneuver(m)
+
+    def sent(self, velocity: tuple[float, float] | None) -> None:
+        """The setpoint velocity that went out this tick [m/s] (None: none): speed 0 is Rover's stop controller,
+        whose run-on :attr:`stopping` learns from."""
+        self.stop_asked = velocity is not None and math.hypot(*velocity) <= 1e-9
 
     def _maneuver(self, m: Maneuver) -> Command:
         """Ahead (a positive speed over ground along the heading) goes as velocity only, which Rover reads the same

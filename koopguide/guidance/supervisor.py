@@ -354,6 +354,7 @@ class Supervisor:
             v, reason, yaw = self._keep_separation(v, reason, t, yaw)
         self._set_state(state, reason, t)
         velocity = (float(v[0]), float(v[1])) if send else None
+        self.helm.sent(velocity)
         guided = yaw if state in (S.GUIDING, S.ARRIVED) else None
         yaw = None if velocity is None else self.helm.yaw_for(velocity, guided, self.vehicle.heading_rad)
         return ev.Decision(velocity, yaw, state, reason, self.degraded and state is S.GUIDING, tuple(requests))

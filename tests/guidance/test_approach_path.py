@@ -166,7 +166,7 @@ def test_a_disarmed_boat_drifting_measures_the_whole_current_at_once() -> None:
 
 
 def test_the_turn_probe_tells_a_boat_that_turns_in_place_from_one_that_needs_way(law: GuidanceLaw) -> None:
-    from koopguide.guidance.helm import PROBE_RAD, Helm
+    from koopguide.guidance.helm import PROBE_RAD, PROBE_STOP_S, Helm
 
     cfg = guidance_settings.load()
     skid = Helm(cfg, law)
@@ -182,7 +182,11 @@ def test_the_turn_probe_tells_a_boat_that_turns_in_place_from_one_that_needs_way
     assert rudder.ability.needs_way and command is not None
     v, yaw = command
     assert yaw is None and math.hypot(*v) == pytest.approx(cfg.command.turn_speed_mps)  # now a hard turn under way
-    assert rudder.probe(2.0 * cfg.command.probe_turn_s + 0.2, 0.0) is None  # each stage no longer than probe_turn_s
+    end_of_turn = 2.0 * cfg.command.probe_turn_s + 0.2  # each turning stage no longer than probe_turn_s
+    v, yaw = rudder.probe(end_of_turn, 0.3)  # then a stop under way (Rover's stop controller), holding the heading
+    assert np.allclose(v, 0.0) and yaw == pytest.approx(0.3)
+    assert rudder.probe(end_of_turn + PROBE_STOP_S - 0.1, 0.35) == (pytest.approx([0.0, 0.0]), pytest.approx(0.3))
+    assert rudder.probe(end_of_turn + PROBE_STOP_S + 0.1, 0.35) is None  # for PROBE_STOP_S
 
 
 def test_the_probes_hard_turn_under_way_lasts_its_whole_stage_and_keeps_the_tightest_circle(law: GuidanceLaw) -> None:
@@ -206,11 +210,33 @@ def test_the_probes_hard_turn_under_way_lasts_its_whole_stage_and_keeps_the_tigh
         commands.append((t, rudder.probe(t, heading)))
         circles.append(rudder.ability.radius_m)
         t += 0.05
-    asked = [when - begun for when, command in commands if command is not None]
-    assert max(asked) == pytest.approx(stage, abs=0.11)  # the whole stage, not up to the first reading
+    turning = [when - begun for when, command in commands if command is not None and command[1] is None]
+    assert max(turning) == pytest.approx(stage, abs=0.11)  # the whole stage, not up to the first reading
     first = next(r for r in circles if r is not None)
     assert first > 2.0 * radius  # 1.5 s in, the turn still tightening
     assert rudder.ability.radius_m == pytest.approx(radius, rel=0.1)  # the tightest, at the stage's end
+
+
+def test_the_helm_learns_how_far_the_boat_runs_on_only_from_setpoints_of_speed_0(law: GuidanceLaw) -> None:
+    """What went out decides: a boat slowing while it was sent speed 0 (Rover's stop controller) is evidence of its
+    stopping time; the same slowing under a setpoint with way, or against the area's edge (a wall stops a boat
+    too), is none."""
+    from koopguide.guidance.estimation.stopping import PRIOR_S
+    from koopguide.guidance.helm import Helm
+
+    cfg = guidance_settings.load()
+
+    def stop(sent: tuple[float, float], at_edge: bool) -> float:
+        helm = Helm(cfg, law)
+        for k in range(60):  # 6 s of a stop with tau = 3 s from 0.2 m/s, heading north in still water
+            t = 0.1 * k
+            helm.sent(sent)
+            helm.observe(t, 0.0, 0.0, np.array([0.2 * math.exp(-t / 3.0), 0.0]), None, at_edge=at_edge)
+        return helm.stopping.tau_s
+
+    assert stop((0.0, 0.0), False) == pytest.approx(3.0, rel=0.1)
+    assert stop((0.05, 0.0), False) == pytest.approx(PRIOR_S)  # slowing to a speed asked: not a stop
+    assert stop((0.0, 0.0), True) == pytest.approx(PRIOR_S)  # at the edge
 
 
 def test_the_probes_hard_turn_goes_to_the_side_that_stays_inside_the_area(law: GuidanceLaw) -> None:

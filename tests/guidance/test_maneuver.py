@@ -15,7 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from koopguide.guidance.estimation.turning import RATE_FLOOR, TurnAbility
-from koopguide.guidance.law.approach_path import ApproachPath
+from koopguide.guidance.law.approach_path import MIN_SPEED_MPS as PATH_MIN_SPEED_MPS
+from koopguide.guidance.law.approach_path import STEP_M, ApproachPath
 from koopguide.guidance.law.capture import ENTRY_RAD
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
 from koopguide.guidance.law.creep_cycle import CREEP_M, CREEP_MPS
@@ -358,3 +359,32 @@ def test_a_held_current_line_turns_slowly_toward_the_estimate_and_a_line_not_hel
     for k in range(21, round(5.0 * AXIS_TAU_S / 0.1)):  # it lasts: the line follows it
         line.aim(p, goal, math.pi, swung, t=0.1 * k)
     assert abs(wrap_pi(line.axis_rad - upstream)) < math.radians(0.2)
+
+
+@pytest.mark.parametrize("stop_s", [1.0 / 0.6, 3.0, 6.0])
+def test_a_boat_slow_to_stop_is_ramped_onto_the_goal_no_faster_than_it_can_stop(stop_s: float) -> None:
+    """From speed u a boat told to stop runs on about u tau (estimation/stopping.py): the line's feedback and the
+    planned approach's runs ask at most distance / tau, so a heavy hull does not run past the goal (one of twice the
+    mass with a weak astern ran 0.2 m past it on the ramps made for the simulator's boats)."""
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.25)
+    line.stop_s = stop_s
+    goal, heading = np.zeros(2), 0.0
+    p = np.array([-0.4, 0.0])  # on the line, 0.4 m short of the goal, facing it
+    line.aim(p, goal, heading, None)
+    m = line.command(p, goal, heading, radius_m=None)  # no circle yet: feedback along the line
+    assert not m.astern and m.speed_mps == pytest.approx(0.4 * min(0.5, 1.0 / stop_s))
+    assert m.speed_mps * stop_s <= 0.4 + 1e-9  # its run-on from that speed ends by the goal
+    line.command(p, goal, heading, radius_m=1.2, t=0.0)  # the planned approach's ramps too
+    assert line.path.stop_gain == pytest.approx(min(0.6, 1.0 / stop_s))
+    far = np.array([-3.0, 1.0])  # a path planned from afar: each run's end is ramped down to by its stop gain
+    path = line.path
+    assert path.plan(0.0, far, heading, goal, None, 1.2, None, None)
+    slowing = []
+    for k, (n, e, h, _) in enumerate(path.samples[:-1]):
+        m = path.command(0.1 * k, np.array([n, e]), h, None)  # the boat on the path, in still water
+        if m is None:
+            break
+        remaining = STEP_M * (path._run_end(path.i) - path.i)  # along the run to its end [m]
+        if remaining < 0.3:
+            slowing.append(abs(m.speed_mps) <= max(PATH_MIN_SPEED_MPS, path.stop_gain * remaining) + 1e-9)
+    assert slowing and all(slowing)

@@ -35,7 +35,8 @@ shortest one between two poses (law/reeds_shepp.py). Here:
   in the water is its position less ``c`` times the time since the plan, and the tracker is line-of-sight
   guidance on that: the path's course ``LOOK_M`` ahead, less atan(offset / ``LOS_DELTA_M``) (astern the bow
   points opposite the course), at the speed through the water that stops the boat at the run's end
-  (``STOP_GAIN`` per metre still to go, at most ``cruise``, and at least ``WATER_MARGIN_MPS`` faster than the
+  (``STOP_GAIN`` per metre still to go, less for a boat slow to stop: ``stop_gain``, set from its stopping time
+  by law/line_approach.py; at most ``cruise``, and at least ``WATER_MARGIN_MPS`` faster than the
   current, so that the speed over ground along the heading, which sets the autopilot's rudder, keeps the
   sign of the way through the water). Rover holds speed over ground along the heading, so the speed sent is
   that through the water plus the current's component along the heading;
@@ -118,6 +119,7 @@ class ApproachPath:
         self.t_failed: float | None = None  # vehicle time of the last plan that found nothing [s]
         self.times = np.zeros(0)  # when the boat is to reach each sample [s after the plan]
         self.current = np.zeros(2)  # the current the plan was made in [m/s]
+        self.stop_gain = STOP_GAIN  # speed per metre to a run's end: less for a boat slow to stop (LineApproach)
 
     def reset(self) -> None:
         self.samples, self.i, self.t_planned, self.final_heading = [], 0, None, None
@@ -210,7 +212,7 @@ class ApproachPath:
         return min(self.cruise, max(MIN_SPEED_MPS, float(np.hypot(*c)) + WATER_MARGIN_MPS))
 
     def _times(self, samples: list[tuple[float, float, float, float]], floor: float) -> np.ndarray:
-        """When the tracker reaches each of ``samples`` [s from the start]: its speed profile (``STOP_GAIN`` per
+        """When the tracker reaches each of ``samples`` [s from the start]: its speed profile (``stop_gain`` per
         metre to each run's end, between ``floor`` and ``cruise``), plus ``CUSP_S`` per reversal."""
         P = np.array([s[:2] for s in samples])
         d = np.array([s[3] for s in samples])
@@ -218,7 +220,7 @@ class ApproachPath:
         remaining = np.zeros(len(P))  # to the end of each sample's run [m]
         for k in range(len(P) - 2, -1, -1):
             remaining[k] = remaining[k + 1] + step[k] if d[k + 1] == d[k] else 0.0
-        speed = np.clip(STOP_GAIN * remaining[1:], floor, self.cruise)
+        speed = np.clip(self.stop_gain * remaining[1:], floor, self.cruise)
         driven = remaining[:-1] > RUN_END_M  # the last RUN_END_M of a run counts as driven at once
         dt = driven * step / speed + CUSP_S * (d[1:] != d[:-1])
         return np.concatenate([[0.0], np.cumsum(dt)])
@@ -282,7 +284,7 @@ class ApproachPath:
         across = -math.sin(motion) * (p[0] - n) + math.cos(motion) * (p[1] - e)  # to the right of the course [m]
         course = wrap_pi(ahead_course - math.atan2(across, LOS_DELTA_M))
         heading = course if direction > 0 else wrap_pi(course + math.pi)
-        speed = min(self.cruise, max(self._floor(c), STOP_GAIN * remaining))  # through the water
+        speed = min(self.cruise, max(self._floor(c), self.stop_gain * remaining))  # through the water
         over_ground = direction * speed + float(c @ unit(heading))  # Rover holds the speed over ground
         # ... never faster than max_speed (with the current from astern, cruise plus the current could be)
         return Maneuver(heading, capped(over_ground, self.max_speed), direction < 0)

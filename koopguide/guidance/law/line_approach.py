@@ -40,7 +40,8 @@ turn (the autopilot reverses the rudder astern, docs/rover.md). Four modes, one 
   corner for a minute, its bow never turning: every reversal holds the heading). After a reversal the heading is
   held until the water passes the rudder the new way (before that the rudder turns the boat the wrong way);
 * the speed over ground along the heading: at least the way the rudder needs (``way_mps``) while turning,
-  else ``gain`` times the distance to the goal plus the station keeper's integral term along the heading
+  else ``gain`` (at most 1 / the boat's stopping time ``stop_s``, estimation/stopping.py; so do the planned
+  approach's runs) times the distance to the goal plus the station keeper's integral term along the heading
   (PI with anti-windup, law/station.py: what holds a boat whose speed loop is not over ground); in a
   current, a speed that would move the boat over ground one way while the water passes the rudder the
   other way (the autopilot sets the rudder by the speed's sign) is sent as exactly 0 instead, Rover's stop
@@ -57,7 +58,7 @@ from types import EllipsisType
 
 import numpy as np
 
-from koopguide.guidance.law.approach_path import HOLD_ALONG_M, ApproachPath
+from koopguide.guidance.law.approach_path import HOLD_ALONG_M, STOP_GAIN, ApproachPath
 from koopguide.guidance.law.capture import (
     CAPTURE_LEAVE_M,
     CAPTURE_M,
@@ -88,19 +89,16 @@ EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed
 EDGE_MIN_M = 0.15  # [m]
 EDGE_SLANT = math.sin(math.radians(20.0))  # ... "leaves" when at least this fraction of the look goes outward
 EDGE_LEG_M = 0.3  # after a reversal at the edge the boat keeps its new way this far (the bow turns on the way) [m]
-# arrived and holding on a current's line, the line turns toward the estimate's direction with this time constant: the
-# current's line is held only in water not seen to be sheared, where the current is steady and its estimate's wander
-# (the hull's own sway read as current, 15 deg either way) is no change of the water; a bow that cannot turn while the
-# boat drifts between creeps was left 20 deg off a line that followed it, and righting it with way on ran a rudder boat
-# 0.2-0.45 m off after early arrivals (a hull slipping more than the simulator's, Zshape start 3 toward W: 4 of 10
-# flights within issue 10's bounds; with it 8 of 8, stop 35) [s]
+# arrived and holding on a current's line, the line turns toward the estimate's direction with this time constant: in
+# water not seen to be sheared the current is steady, and its estimate's wander (the hull's sway read as current, 15
+# deg either way) left a bow that cannot turn while drifting 20 deg off a line that followed it; righting it ran a
+# rudder boat 0.2-0.45 m off (hull slipping more, Zshape start 3 toward W: 4 of 10 flights in bounds, with it 8/8) [s]
 AXIS_TAU_S = 20.0
 EDGE_COURSE_M = 0.5  # a course along the line "leads out" when the point this far along it is farther out [m]
 
 
 class LineApproach:
-    """LOS guidance onto the line through the goal with bow direction ``axis_rad`` (set by :meth:`aim`), ahead
-    and astern by turns."""
+    """LOS guidance onto the line through the goal with bow direction ``axis_rad`` (:meth:`aim`), ahead/astern."""
 
     def __init__(
         self, max_speed_mps: float, gain_per_s: float, settle_m: float, way_mps: float, approach_mps: float
@@ -121,6 +119,7 @@ class LineApproach:
         self.cycle = CreepCycle(TURNING_RAD, gain_per_s)  # holding in a current: creeps upstream about the goal
         self.drift: np.ndarray | None = None  # the current the capture search's model boat drifts on [m/s]
         self.aim_t: float | None = None  # vehicle time of the last aim [s]
+        self.stop_s = 1.0 / STOP_GAIN  # the boat's stopping time, set by the caller (estimation/stopping.py) [s]
 
     def reset(self) -> None:
         self.axis_rad, self.astern, self.in_current, self.travel, self.pivot = None, False, False, None, None
@@ -190,6 +189,7 @@ class LineApproach:
         p = np.asarray(p_ned, dtype=float)
         e = p - np.asarray(goal_ned, dtype=float)
         _, _, along, cross = self._line_frame(e)
+        self.path.stop_gain = min(STOP_GAIN, 1.0 / self.stop_s)  # no ramp runs on past its end
         planned = (
             None
             if t is None
@@ -266,7 +266,7 @@ class LineApproach:
                 self.edge_leg = (p.copy(), self.astern)
         sign = -1.0 if self.astern else 1.0
         turning = error > TURNING_RAD
-        s = sign * min(self.max_speed, self.gain * math.hypot(along, cross))
+        s = sign * min(self.max_speed, min(self.gain, 1.0 / self.stop_s) * math.hypot(along, cross))
         if bias_ned is not None:
             s += float(np.asarray(bias_ned, dtype=float) @ unit(heading))  # the PI's integral along the heading
         if turning:
@@ -330,9 +330,9 @@ class LineApproach:
             leave_rad = UNARRIVED_LEAVE_RAD if self.in_current and not arrived else LEAVE_RAD
             self.holding = abs(cross) <= leave_cross and facing <= leave_rad and abs(along) <= LEAVE_ALONG_M
         else:
-            # the hold takes on only a bow lined up as well as the capture search hands over, however the boat got
-            # there: taken on 20-25 deg off, its righting set boats across the line and beyond the reacquire radius
-            # (holds of 0.3-0.7 m p95 in one uniform run in 25); held astern, tighter still (capture.entry_rad)
+            # the hold takes on only a bow lined up as well as the capture search hands over: taken on 20-25 deg off,
+            # its righting set boats beyond the reacquire radius (0.3-0.7 m p95 in one uniform run in 25); astern,
+            # tighter still (capture.entry_rad)
             entry = entry_rad(self.axis_rad, current_ned if self.in_current else None)
             near = abs(cross) <= ENTRY_CROSS_M and facing <= entry and abs(along) <= HOLD_ALONG_M
             if near and self.in_current and current_ned is not None and abs(cross) > ENTRY_SIDE_M:
