@@ -34,8 +34,8 @@ class StoppingTime:
     """Fold in one sample per command with :meth:`update`; read :attr:`tau_s`."""
 
     def __init__(self) -> None:
-        self._sxx = 0.0  # sum of ((u0 + u1) / 2 dt)^2 [m^2]
-        self._sxy = 0.0  # sum of ((u0 + u1) / 2 dt)(u0 - u1) [m^2/s]
+        self._sxx = 0.0  # sum over windows of x^2, x = integral(u dt) the way run in the window [m^2]
+        self._sxy = 0.0  # sum over windows of x (u0 - u1), the speed lost in it [m^2/s]
         self._window: tuple[float, float] | None = None  # (t0, u0) of the window under way
         self._run_m = 0.0  # the way run in it so far (trapezoids) [m]
         self._t: float | None = None  # vehicle time of the last sample [s]
