@@ -1,12 +1,15 @@
 """StoppingTime: how far this boat runs on when told to stop, learned from its own telemetry (pure, no I/O).
 
 Told speed 0 (Rover's stop controller: it brakes down to ATC_STOP_SPEED, then the throttle goes off and the hull's
-drag alone slows it, docs/simulator.md), a boat's way through the water dies away roughly as a first-order lag, ``du/dt
-= -u / tau``, so from speed ``u`` it runs on about ``u tau`` before it stops. ``tau`` depends on the hull (its mass
-against its drag) and on how hard the autopilot can brake (the thrust astern): about 1.7 s for the simulator's
-boats, 3 s for one of twice the mass with half the thrust astern. Speed ramps that end a run at a point
-(law/approach_path.py, law/line_approach.py) ask no more speed than ``distance / tau``: on ramps made for the
-simulator's boats, one of twice the mass with a weak astern ran 0.2 m past the goal.
+drag alone slows it, docs/simulator.md), a boat's way through the water dies away roughly as a first-order lag,
+``du/dt = -u / tau``, so from speed ``u`` it runs on about ``u tau`` before it stops. ``tau`` depends on the hull
+(its mass against its drag) and on how hard the autopilot can brake (the thrust astern). Stopped from 0.2 m/s in
+open water (0.03 m/s currents from five sides) the simulator's rudder boat gives 0.8-1.2 s, one of twice the mass
+with 45% less thrust astern 1.7-2.3 s; in missions they learn about 1.2-1.3 s and 2.2 s. (The coast after the
+braking is slower, the hull's own m11 / |X_u|: 1.5 and 2.8 s; this fit is dominated by the braking, where the way
+is.) Speed ramps that end a run at a point (law/approach_path.py, law/line_approach.py) ask no more speed than
+``distance / tau``: on ramps made for the simulator's boats, one of twice the mass with a weak astern ran 0.2 m past
+the goal.
 
 ``tau`` is fitted by least squares over windows of at least ``WINDOW_S`` while the boat is told to stop and moves
 (``|u| >= MOVING_MPS``): the speed lost in a window against the way run in it, ``u0 - u1 = integral(u dt) / tau``
