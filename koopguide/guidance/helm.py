@@ -51,7 +51,9 @@ class Helm:
         self.cfg, self.law = cfg, law
         self.ability = TurnAbility()
         self.stopping = StoppingTime()  # how far the boat runs on when told to stop
-        self.planner = ManeuverPlanner(cfg.command.max_speed_mps, cfg.command.turn_speed_mps)
+        self.planner = ManeuverPlanner(
+            cfg.command.max_speed_mps, cfg.command.turn_speed_mps, math.radians(cfg.arrival.facing_deg)
+        )
         self.line = LineApproach(
             cfg.command.max_speed_mps,
             cfg.arrival.station_gain,
@@ -62,6 +64,7 @@ class Helm:
         self.speed_mps = 0.0  # the boat's ground speed at the last observation [m/s]
         self.water_mps = 0.0  # ... and its speed through the water along its heading (negative: astern) [m/s]
         self.t: float | None = None  # vehicle time of the last observation [s]
+        self.current_ned: np.ndarray | None = None  # the current estimate [m/s]
         self.current_std = 0.0  # the current estimate's spread [m/s]
         self.sheared = False  # the water has shown shear (latched: a property of the water, not of the boat)
         self.shearing = False  # ... and shows it now
@@ -167,7 +170,7 @@ class Helm:
         is at the area's edge (:meth:`at_edge`), where a wall may turn or stop it: how it turns and stops is not
         learned there (a rudder boat of a 2.4 m circle set onto a tank's wall turned on it as if on a 0.8 m one,
         and the approach planned on that circle backed and filled by the wall for a minute, stop 35)."""
-        self.t, self.current_std = t, current_std_mps
+        self.t, self.current_ned, self.current_std = t, current_ned, current_std_mps
         self.shearing = shear_weight > SHEARED_WEIGHT  # the estimator sees shear now
         self.sheared = self.sheared or self.shearing
         if velocity_ned is not None:
@@ -200,7 +203,11 @@ class Helm:
         In company the distance alone decides; without a heading too, unless the boat is known to need way: then
         a tick whose attitude is stale tells nothing about its line (such ticks are 1 in 2000, yet 72 of 2632
         traced rudder arrivals came on one, crossing the goal at way with the bow up to 48 deg off the line:
-        half of those in uniform currents then held over 0.2 m p95)."""
+        half of those in uniform currents then held over 0.2 m p95). A boat that turns in place, in a current (not
+        sheared water: there the current at the boat turns as it goes), once its hull lies within ``facing_deg`` of the
+        current's line, either end: one across it is carried off while it turns (7 deg/s: 0.2-0.4 m in 0.03 m/s). A
+        current within one spread of nothing gives no line (a hull that slips more spreads the estimate: 0.015 m/s
+        about a 0.03 m/s current, where the rudder boat's two spreads left a skid-steer one arriving across it)."""
         if self.in_company:
             return True
         a = self.ability
@@ -208,7 +215,11 @@ class Helm:
             return not a.needs_way
         if not (a.pivot_seen or a.needs_way or self.cfg.command.probe_turn_s <= 0.0):
             return False
-        return not a.needs_way or self.line.holding
+        if a.needs_way:
+            return self.line.holding
+        c = self._line_current(self._current(self.current_ned), 1.0)  # clear of its spread: a line to hold to
+        across = 0.0 if c is None or self.sheared else math.sin(heading_rad - math.atan2(c[1], c[0]))
+        return abs(across) <= math.sin(math.radians(self.cfg.arrival.facing_deg))
 
     def line_radius_m(self) -> float:
         """Within this distance of the goal a boat that needs way makes for the line it will hold (twice its
@@ -229,10 +240,12 @@ class Helm:
         current_ned: np.ndarray | None,
         distance_m: float,
         bias_ned: np.ndarray | None = None,
+        holding: bool = False,
     ) -> Command:
         """Toward the goal ``distance_m`` away at ground velocity ``wanted_ned``: heading and speed, ahead or
         astern (a boat that needs way: along the line it will hold, law/line_approach.py, its speed from the
-        distance plus the station keeper's integral term ``bias_ned`` [m/s])."""
+        distance plus the station keeper's integral term ``bias_ned`` [m/s]). ``holding``: keeping station (a boat
+        that turns in place keeps its hull on the current's line, law/maneuver.py)."""
         if heading_rad is None or (self.in_company and self.ability.needs_way):
             # no attitude: all that can be sent is a velocity; among other boats the separation filter shapes the
             # velocities of a boat that needs way (law/separation.py reasons about Rover's heading-and-speed
@@ -251,6 +264,7 @@ class Helm:
             self.ability,
             distance_m,
             slow_to_turn=self.cfg.command.turn_slowdown,
+            holding=holding,
         )
         return self._maneuver(m)
 
@@ -301,12 +315,14 @@ class Helm:
         if probe is not None:
             return probe
         if within:
-            # within the arrival radius, not yet holding its line (the supervisor has not arrived): still on the way
+            # within the arrival radius, not yet holding its line (the supervisor has not arrived): still on the way; a
+            # boat that turns in place turns onto the current's line as it keeps station
             self.doing = LINE_DOING
-            return self.near(p_ned, sp.velocity_ned, heading_rad, current_ned, distance_m)
+            wanted = self.law.station_velocity(p_ned, self._current(current_ned))
+            return self.near(p_ned, wanted, heading_rad, current_ned, distance_m, holding=True)
         if distance_m <= self.cfg.arrival.capture_radius_m:
             cmd = self.near(p_ned, sp.ground_ned, heading_rad, current_ned, distance_m)
-            self.doing = self.doing if self.on_station(heading_rad) else LINE_DOING
+            self.doing = LINE_DOING if self.ability.needs_way and not self.on_station(heading_rad) else self.doing
             return cmd
         return self.follow(p_ned, sp, heading_rad, current_ned, distance_m)
 
@@ -323,11 +339,9 @@ class Helm:
     def _on_line(
         self, p_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None, bias_ned: np.ndarray | None = None
     ) -> Command:
-        c = self._current(current_ned)
         # the line follows a current only once the estimate is clear of its own spread (early on, its direction
         # swings with every turn, and so would the line), and until it is within one spread of nothing
-        sigmas = 1.0 if self.line.in_current else LINE_CURRENT_SIGMAS
-        c = c if c is not None and float(np.hypot(*c)) >= max(CURRENT_MIN_MPS, sigmas * self.current_std) else None
+        c = self._line_current(self._current(current_ned), 1.0 if self.line.in_current else LINE_CURRENT_SIGMAS)
         # in sheared water the current at the boat is no guide to the goal's (in the campaign's double gyre it turns
         # by 90 deg within 0.3 m of the goal): a line along the estimate swung 5-15 deg/s, and the boat chasing it
         # lined up too late or never (86.7% arrived in 180 runs); the still-water line, kept once chosen, 94.4%
@@ -363,6 +377,10 @@ class Helm:
         astern, or speed exactly 0 (hold the heading), needs the yaw."""
         self.asked_heading = m.heading_rad
         return m.velocity_ned, (None if m.speed_mps > 0.0 else m.heading_rad)
+
+    def _line_current(self, c: np.ndarray | None, sigmas: float) -> np.ndarray | None:
+        """The current estimate ``c`` when it is clear of ``sigmas`` of its spread (and of ``CURRENT_MIN_MPS``)."""
+        return c if c is not None and float(np.hypot(*c)) >= max(CURRENT_MIN_MPS, sigmas * self.current_std) else None
 
     def _current(self, current_ned: np.ndarray | None) -> np.ndarray | None:
         return current_ned if self.cfg.command.current_compensation else None

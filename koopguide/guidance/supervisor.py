@@ -264,7 +264,7 @@ class Supervisor:
         state = S.GUIDING
         if self.arrived or drifted_near:
             wanted = self.station.update(now, error, law.station_velocity(p, current))  # P (capped) + I
-            v, yaw = self.helm.near(p, wanted, heading, current, distance, self.station.integral)
+            v, yaw = self.helm.near(p, wanted, heading, current, distance, self.station.integral, holding=True)
             if drifted_near and self.progress.update(now, p, wanted, distance):
                 return self._start_pursuit(now, wall, distance, requests)
             if drifted_near:
@@ -280,7 +280,9 @@ class Supervisor:
             speed = float(np.hypot(*wanted))
             if 1e-12 < speed < cfg.command.min_speed_mps:  # direct pursuit makes progress
                 wanted = wanted * (cfg.command.min_speed_mps / speed)
-            v, yaw = self.helm.near(p, wanted, heading, current, distance, self.station.integral)
+            # within the arrival radius, not on station yet (across the current): onto its line, as keeping station
+            holding = distance <= arrival.radius_m
+            v, yaw = self.helm.near(p, wanted, heading, current, distance, self.station.integral, holding=holding)
             why = " (no progress in direct pursuit either)" if self.progress.update(now, p, wanted, distance) else ""
             reason = f"direct pursuit of the goal, {distance:.2f} m away: no progress along the field for "
             reason += f"{cfg.failsafe.stall_s:g} s{why}"
@@ -310,8 +312,7 @@ class Supervisor:
         done = distance <= arrival.settle_radius_m and along_current(heading, current, arrival.facing_deg)
         if not (done or now - self.arrived_t >= arrival.settle_timeout_s):
             return False
-        self.settled = True
-        after, mode = now - self.arrived_t, arrival.on_arrival.value.upper()
+        self.settled, after, mode = True, now - self.arrived_t, arrival.on_arrival.value.upper()
         self._note(logging.INFO, f"settled {distance:.3f} m from the goal after {after:.1f} s; switching to {mode}")
         return True
 
@@ -323,8 +324,7 @@ class Supervisor:
         reason = f"drifted {distance:.2f} m from the goal, beyond reacquire_radius_m {limit:g}: guiding back"
         self.back_reason = reason.replace(": guiding back", "; ")
         self._note(logging.WARNING, reason)
-        self.arrived, self.reclaim = False, self.settled
-        self.settled = self.degraded = False
+        self.arrived, self.reclaim, self.settled, self.degraded = False, self.settled, False, False
         self.progress.reset()  # the station keeper's integral stays: a bias of the boat or the current
         self._set_state(S.GUIDING, reason, now)
 

@@ -189,6 +189,32 @@ def test_the_turn_probe_tells_a_boat_that_turns_in_place_from_one_that_needs_way
     assert rudder.probe(end_of_turn + PROBE_STOP_S + 0.1, 0.35) is None  # for PROBE_STOP_S
 
 
+def test_a_boat_that_turns_in_place_is_on_station_only_with_its_hull_on_the_currents_line(law: GuidanceLaw) -> None:
+    """Arrived across a current, a skid-steer boat turning at 7 deg/s was carried 0.2-0.4 m off while it turned to
+    hold: it is on station (may arrive) once its hull lies within facing_deg of the current's line, either end; in
+    still water, a current within its spread of nothing, or sheared water, wherever it heads."""
+    from koopguide.guidance.helm import Helm
+
+    cfg = guidance_settings.load()
+    facing = math.radians(cfg.arrival.facing_deg)
+    north = np.array([0.03, 0.0])  # the current, toward the north: upstream is south
+
+    def helm_seeing(current, std=0.002, shear=0.0) -> Helm:
+        helm = Helm(cfg, law)
+        helm.ability.pivot_seen = True  # the turn probe has seen it turn in place
+        helm.observe(0.0, 0.0, 0.0, np.zeros(2), current, std, shear)
+        return helm
+
+    helm = helm_seeing(north)
+    for heading in (math.pi / 2, -math.pi / 2, math.pi / 2 + 1.5 * facing, -math.pi / 2 - 1.5 * facing):
+        assert not helm.on_station(heading), math.degrees(heading)
+    for heading in (math.pi, math.pi - 0.9 * facing, 0.0, 0.9 * facing, -0.9 * facing):  # up- or downstream
+        assert helm.on_station(heading), math.degrees(heading)
+    for current, std, shear in ((None, 0.0, 0.0), (north, 0.04, 0.0), (np.array([0.003, 0.0]), 0.0, 0.0)):
+        assert helm_seeing(current, std, shear).on_station(math.pi / 2)  # no line to hold to
+    assert helm_seeing(north, shear=0.9).on_station(math.pi / 2)  # sheared: the current at the boat is no guide
+
+
 def test_the_probes_hard_turn_under_way_lasts_its_whole_stage_and_keeps_the_tightest_circle(law: GuidanceLaw) -> None:
     """A rudder boat's turn tightens for seconds after the rudder goes over (its turn rate grows to r = u / R);
     the circle read 1.5 s in was 2-9 m against the boat's 1.1-1.5 m. The probe goes on for its whole stage and

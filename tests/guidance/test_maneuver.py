@@ -21,7 +21,14 @@ from koopguide.guidance.law.capture import ENTRY_RAD
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
 from koopguide.guidance.law.creep_cycle import CREEP_M, CREEP_MPS
 from koopguide.guidance.law.line_approach import EDGE_LEG_M, LineApproach
-from koopguide.guidance.law.maneuver import ASTERN_RAD, MIN_SPEED_MPS, Maneuver, ManeuverPlanner, wrap_pi
+from koopguide.guidance.law.maneuver import (
+    ASTERN_RAD,
+    HOLDING_ASTERN_RAD,
+    MIN_SPEED_MPS,
+    Maneuver,
+    ManeuverPlanner,
+    wrap_pi,
+)
 from koopguide.mavlink.rover import MASK_VELOCITY_YAW, velocity_setpoint
 
 angles = st.floats(-math.pi, math.pi, allow_nan=False)
@@ -88,6 +95,51 @@ def test_astern_has_hysteresis_so_a_goal_abeam_does_not_flip_it_every_command() 
     assert planner.plan(abeam_aft, 0.0, None, pivoting()).astern
     forward = unit(math.radians(40.0)) * 0.1  # astern would need 140 deg > 120: ahead again
     assert not planner.plan(forward, 0.0, None, pivoting()).astern
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    heading=angles,
+    c_dir=angles,
+    c_speed=st.floats(1.01 * CURRENT_MIN_MPS, 0.1),
+    wanted=st.floats(0.0, 0.3),
+    w_dir=angles,
+)
+def test_keeping_station_in_a_current_the_hull_stays_on_its_line_at_the_nearer_end(
+    heading, c_dir, c_speed, wanted, w_dir
+) -> None:
+    """Whatever ground velocity the station keeper wants (even the current's own, where the water velocity
+    vanishes and its direction is noise), a boat holding in a current is sent a heading within the ferry angle of
+    the current's line, bow upstream or downstream, whichever turns it less (past HOLDING_ASTERN_RAD)."""
+    ferry = math.radians(30.0)
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=ferry)
+    c = c_speed * unit(c_dir)
+    m = planner.plan(wanted * unit(w_dir), heading, c, pivoting(), distance_m=0.1, holding=True)
+    upstream = c_dir + math.pi
+    off_line = abs(wrap_pi(m.heading_rad - upstream))
+    off_line = min(off_line, math.pi - off_line)  # the hull's line, either end
+    assert off_line <= ferry + 1e-9
+    to_upstream = abs(wrap_pi(upstream - heading))
+    if to_upstream < math.pi - HOLDING_ASTERN_RAD - 1e-6:
+        assert not m.astern and abs(wrap_pi(m.heading_rad - upstream)) <= ferry + 1e-9
+    elif to_upstream > HOLDING_ASTERN_RAD + 1e-6:
+        assert m.astern and abs(wrap_pi(m.heading_rad - upstream - math.pi)) <= ferry + 1e-9
+    assert abs(wrap_pi(m.heading_rad - heading)) <= HOLDING_ASTERN_RAD + ferry + 1e-9
+    assert abs(m.speed_mps) <= 0.3 + 1e-12 and math.isfinite(m.speed_mps)
+
+
+def test_keeping_station_the_ferry_angle_sets_the_boat_across_the_current_the_way_it_is_wanted() -> None:
+    """Rover holds the ground speed along the heading; the current's component across a hull turned delta off its
+    line sets the boat sideways at |c| sin delta: toward the side the station keeper asks for, ahead or astern."""
+    c = np.array([0.0, 0.03])  # toward the east: upstream is west
+    for heading in (-math.pi / 2 + 0.2, math.pi / 2 - 0.2):  # bow upstream (ahead), bow downstream (astern)
+        for north in (0.02, -0.02):
+            planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15)
+            m = planner.plan(np.array([north, 0.0]), heading, c, pivoting(), holding=True)
+            assert m.astern == (heading > 0)
+            made_good = rover_ground_velocity(m.heading_rad, m.speed_mps, c)
+            assert made_good[0] * north > 0  # it is set the way it should go
+            assert abs(made_good[1]) < 0.01  # ... and held against the current
 
 
 @settings(max_examples=200, deadline=None)
