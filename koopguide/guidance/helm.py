@@ -20,7 +20,14 @@ import numpy as np
 
 from koopguide.guidance.estimation.stopping import StoppingTime
 from koopguide.guidance.estimation.turning import TurnAbility
-from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, CURRENT_MIN_MPS, GuidanceLaw, GuidanceState, Setpoint
+from koopguide.guidance.law.command import (
+    CRAB_MIN_SPEED_MPS,
+    CURRENT_MIN_MPS,
+    GuidanceLaw,
+    GuidanceState,
+    Setpoint,
+    along_current,
+)
 from koopguide.guidance.law.line_approach import DEFAULT_RADIUS_M, LineApproach
 from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, unit, wrap_pi
 from koopguide.guidance.settings import GuidanceConfig
@@ -218,8 +225,7 @@ class Helm:
         if a.needs_way:
             return self.line.holding
         c = self._line_current(self._current(self.current_ned), 1.0)  # clear of its spread: a line to hold to
-        across = 0.0 if c is None or self.sheared else math.sin(heading_rad - math.atan2(c[1], c[0]))
-        return abs(across) <= math.sin(math.radians(self.cfg.arrival.facing_deg))
+        return self.sheared or along_current(heading_rad, c, self.cfg.arrival.facing_deg)
 
     def line_radius_m(self) -> float:
         """Within this distance of the goal a boat that needs way makes for the line it will hold (twice its
