@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from koopguide.guidance.estimation.turning import RATE_FLOOR, TurnAbility
 from koopguide.guidance.law.approach_path import MIN_SPEED_MPS as PATH_MIN_SPEED_MPS
-from koopguide.guidance.law.approach_path import STEP_M, ApproachPath
+from koopguide.guidance.law.approach_path import STEP_M, STOP_GAIN, ApproachPath
 from koopguide.guidance.law.capture import ENTRY_RAD
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
 from koopguide.guidance.law.creep_cycle import CREEP_M, CREEP_MPS
@@ -413,7 +413,7 @@ def test_a_held_current_line_turns_slowly_toward_the_estimate_and_a_line_not_hel
     assert abs(wrap_pi(line.axis_rad - upstream)) < math.radians(0.2)
 
 
-@pytest.mark.parametrize("stop_s", [1.0 / 0.6, 3.0, 6.0])
+@pytest.mark.parametrize("stop_s", [1.0 / STOP_GAIN, 3.0, 6.0])
 def test_a_boat_slow_to_stop_is_ramped_onto_the_goal_no_faster_than_it_can_stop(stop_s: float) -> None:
     """From speed u a boat told to stop runs on about u tau (estimation/stopping.py): the line's feedback and the
     planned approach's runs ask at most distance / tau, so a heavy hull does not run past the goal (one of twice the
@@ -427,7 +427,7 @@ def test_a_boat_slow_to_stop_is_ramped_onto_the_goal_no_faster_than_it_can_stop(
     assert not m.astern and m.speed_mps == pytest.approx(0.4 * min(0.5, 1.0 / stop_s))
     assert m.speed_mps * stop_s <= 0.4 + 1e-9  # its run-on from that speed ends by the goal
     line.command(p, goal, heading, radius_m=1.2, t=0.0)  # the planned approach's ramps too
-    assert line.path.stop_gain == pytest.approx(min(0.6, 1.0 / stop_s))
+    assert line.path.stop_gain == pytest.approx(min(STOP_GAIN, 1.0 / stop_s))
     far = np.array([-3.0, 1.0])  # a path planned from afar: each run's end is ramped down to by its stop gain
     path = line.path
     assert path.plan(0.0, far, heading, goal, None, 1.2, None, None)
@@ -436,7 +436,7 @@ def test_a_boat_slow_to_stop_is_ramped_onto_the_goal_no_faster_than_it_can_stop(
         m = path.command(0.1 * k, np.array([n, e]), h, None)  # the boat on the path, in still water
         if m is None:
             break
-        remaining = STEP_M * (path._run_end(path.i) - path.i)  # along the run to its end [m]
+        remaining = STEP_M * (path.run_end(path.i) - path.i)  # along the run to its end [m]
         if remaining < 0.3:
             slowing.append(abs(m.speed_mps) <= max(PATH_MIN_SPEED_MPS, path.stop_gain * remaining) + 1e-9)
     assert slowing and all(slowing)

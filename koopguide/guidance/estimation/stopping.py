@@ -24,7 +24,9 @@ from __future__ import annotations
 
 import math
 
-PRIOR_S = 1.0 / 0.6  # the stopping time assumed before any stop is seen: the ramps' gain of 0.6 /s [s]
+from koopguide.guidance.law.approach_path import STOP_GAIN
+
+PRIOR_S = 1.0 / STOP_GAIN  # the stopping time assumed before any stop is seen: that the ramps are made for [s]
 PRIOR_WEIGHT = 0.002  # ... worth this much evidence, a fifth of a window at 0.1 m/s [m^2]
 WINDOW_S = 1.0  # a fit window lasts at least this long [s]
 MAX_GAP_S = 0.5  # samples further apart than this break the window [s]

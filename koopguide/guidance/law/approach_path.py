@@ -238,7 +238,7 @@ class ApproachPath:
         milliseconds of the control loop)."""
         return self.t_failed is None or not 0.0 <= t - self.t_failed < RETRY_S
 
-    def _run_end(self, i: int) -> int:
+    def run_end(self, i: int) -> int:
         """Index of the last sample of the run that sample ``i`` belongs to (up to the next reversal)."""
         d = self.samples[i][3]
         j = i
@@ -258,7 +258,7 @@ class ApproachPath:
         c = water_current(current_ned)
         # the boat's place in the water: the water has moved on as the plan assumed
         p = np.asarray(p_ned, dtype=float) - self.current * max(t - self.t_planned, 0.0)
-        end = self._run_end(self.i)
+        end = self.run_end(self.i)
         window = range(self.i, min(end, self.i + SEARCH) + 1)
         self.i = min(window, key=lambda k: math.hypot(self.samples[k][0] - p[0], self.samples[k][1] - p[1]))
         to_end = math.hypot(self.samples[end][0] - p[0], self.samples[end][1] - p[1])
@@ -267,7 +267,7 @@ class ApproachPath:
                 self.reset()
                 return None
             self.i = end + 1
-            end = self._run_end(self.i)
+            end = self.run_end(self.i)
         n, e, path_heading, direction = self.samples[self.i]
         off = math.hypot(n - p[0], e - p[1])
         facing_off = abs(wrap_pi(path_heading - heading_rad)) > REPLAN_RAD
