@@ -5,7 +5,8 @@ slowed to turn, law/command.py). Near a point (within the capture radius, keepin
 directly), and everywhere for a boat seen to need way through the water to turn, it gets a heading-and-speed
 setpoint, ahead or astern (law/maneuver.py): that is what lets a skid-steer boat back onto a goal behind it instead
 of circling it, and a rudder boat keep the way its rudder needs. How the boat turns, and how far it runs on when
-told to stop, are learned from its telemetry (estimation/turning.py, estimation/stopping.py). In water the current
+told to stop, are learned from its telemetry (estimation/turning.py, estimation/speed_lag.py), first asked by the turn
+probe (turn_probe.py); a boat seen to go where it is sent whatever its heading is sent velocities. In water the current
 estimator has seen to be sheared (``SHEARED_WEIGHT``) a boat that needs way holds the still-water line near the
 goal: the current at the boat is no guide to the goal's there. See docs/guidance.md "Any boat".
 
@@ -18,8 +19,10 @@ import math
 
 import numpy as np
 
-from koopguide.guidance.estimation.stopping import StoppingTime
+from koopguide.guidance.estimation.speed_lag import BoatLags
 from koopguide.guidance.estimation.turning import TurnAbility
+from koopguide.guidance.law.approach_path import STOP_GAIN
+from koopguide.guidance.law.capture import SPEED_LAG_S
 from koopguide.guidance.law.command import (
     CRAB_MIN_SPEED_MPS,
     CURRENT_MIN_MPS,
@@ -31,17 +34,8 @@ from koopguide.guidance.law.command import (
 from koopguide.guidance.law.line_approach import DEFAULT_RADIUS_M, LineApproach
 from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, unit, wrap_pi
 from koopguide.guidance.settings import GuidanceConfig
+from koopguide.guidance.turn_probe import TurnProbe
 
-PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.probe_turn_s)
-PROBE_MOVED_RAD = math.radians(10.0)  # the heading moved this much in the probe: the boat turns in place
-PROBE_WAY_RAD = math.radians(90.0)  # ... and the turn under way asked of a boat that needs way, for its circle
-PROBE_CIRCLE_M = 1.5  # ... to the side where a circle this wide stays more inside the area [m]
-PROBE_STOP_S = 2.5  # ... and then a stop under way asked of it, for how far it runs on (estimation/stopping.py) [s]
-PROBE_DOING = {
-    False: "asking a turn in place to tell how the boat turns",
-    True: "asking a hard turn under way to measure its turning circle",
-}
-PROBE_STOP_DOING = "asking a stop under way to measure how far it runs on"
 LINE_CURRENT_SIGMAS = 2.0  # a current estimate this many of its standard deviations strong sets the holding line
 LINE_DOING = "making for the line it can hold the goal on"  # near the goal, a boat that needs way, off its line
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
@@ -57,7 +51,7 @@ class Helm:
     def __init__(self, cfg: GuidanceConfig, law: GuidanceLaw) -> None:
         self.cfg, self.law = cfg, law
         self.ability = TurnAbility()
-        self.stopping = StoppingTime()  # how far the boat runs on when told to stop
+        self.lags = BoatLags(1.0 / STOP_GAIN, SPEED_LAG_S)  # how its way follows speed 0, ahead and astern
         self.planner = ManeuverPlanner(
             cfg.command.max_speed_mps, cfg.command.turn_speed_mps, math.radians(cfg.arrival.facing_deg)
         )
@@ -70,19 +64,17 @@ class Helm:
         )
         self.speed_mps = 0.0  # the boat's ground speed at the last observation [m/s]
         self.water_mps = 0.0  # ... and its speed through the water along its heading (negative: astern) [m/s]
+        self.water_ned: np.ndarray | None = None  # ... its velocity through the water [m/s]
         self.t: float | None = None  # vehicle time of the last observation [s]
         self.current_ned: np.ndarray | None = None  # the current estimate [m/s]
         self.current_std = 0.0  # the current estimate's spread [m/s]
         self.sheared = False  # the water has shown shear (latched: a property of the water, not of the boat)
         self.shearing = False  # ... and shows it now
-        self.probe_until: float | None = None  # vehicle time the turn probe ends [s]
-        self.probe_heading: float | None = None  # the heading it asks [rad]
-        self.probe_from: float | None = None  # the heading when it began [rad]
-        self.probe_with_way = False  # the probe's second stage (a boat that needs way: a hard turn under way)
-        self.probe_stop_until: float | None = None  # ... its third, a stop under way: until this vehicle time [s]
+        self.turn_probe = TurnProbe(cfg.command, law.outside_area)  # how it turns and stops, asked at the start
         self.doing = "following the field"  # what the last command did (for the status's reason)
         self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
-        self.stop_asked = False  # the last setpoint that went out asked speed 0 (:meth:`sent`)
+        self.sent_ned: np.ndarray | None = None  # the velocity last sent [m/s] (None: none went out)
+        self.asked_mps: float | None = None  # speed over ground along the heading last sent (<0: astern; :meth:`sent`)
         # other boats are heard (fleet): following the field and a boat that needs way go velocity-only, as the
         # separation filter expects; a boat that turns in place keeps its ahead-or-astern maneuver near a point
         self.in_company = False
@@ -90,66 +82,19 @@ class Helm:
 
     def reset(self) -> None:
         """A restarted vehicle (maybe another boat): forget how it turns."""
-        self.ability, self.stopping = TurnAbility(), StoppingTime()
-        self.probe_until = self.probe_heading = self.probe_stop_until = None
-        self.probe_with_way = False
+        self.ability = TurnAbility()
+        self.lags = BoatLags(1.0 / STOP_GAIN, SPEED_LAG_S)  # how its way follows speed 0, ahead and astern
+        self.turn_probe = TurnProbe(self.cfg.command, self.law.outside_area)
         self.planner.reset()
         self.line.reset()
         self.asked_heading = None
 
     def probe(self, t: float, heading_rad: float | None, p_ned: np.ndarray | None = None) -> Command | None:
-        """At the start of guiding, for up to ``command.probe_turn_s``: speed 0 at a heading ``PROBE_RAD`` off the
-        boat's (velocity + yaw; Rover turns a skid-steer boat on the spot, a rudder boat not at all). A boat
-        whose heading moves ``PROBE_MOVED_RAD`` turns in place; one whose heading does not move needs way, and is
-        then asked a hard turn under way (``PROBE_WAY_RAD`` off, at ``command.turn_speed_mps``) for as long
-        again, which measures its turning circle, to the side whose circle stays more inside the area
-        (``p_ned``: the boat's position; None: to starboard). The whole turn: the circle is the tightest seen in
-        it, and the first reading (1.5 s in, the turn still tightening) was 2-9 m against the rudder boat's
-        1.1-1.5 m; the plans and the look-ahead kept it until the next hard turn at manoeuvring speed. Then, with
-        the way that turn gave it, speed 0 at its heading for ``PROBE_STOP_S``: how far it runs on (a hull of twice
-        the mass with a weak astern ran 0.2 m past the goal on ramps made for the simulator's, and nothing else
-        tells the service before the boat is first stopped, at the goal). None once done (or off, or no heading
-        known)."""
-        a = self.ability
-        if heading_rad is None or a.pivot_seen:
-            return None
-        if self.probe_until is None:
-            self.probe_until, self.probe_from = t + self.cfg.command.probe_turn_s, heading_rad
-            self.probe_heading = wrap_pi(heading_rad + PROBE_RAD)
-        if not self.probe_with_way:
-            if abs(wrap_pi(heading_rad - self.probe_from)) >= PROBE_MOVED_RAD:
-                a.pivot_seen, a.needs_way = True, False  # it turned without way: it turns in place
-                return None
-            if t < self.probe_until:
-                self.asked_heading = self.probe_heading
-                return np.zeros(2), self.probe_heading
-            if self.cfg.command.probe_turn_s <= 0.0:
-                return None
-            a.needs_way, self.probe_with_way = True, True  # it did not turn: it needs way
-            self.probe_until = t + self.cfg.command.probe_turn_s
-            self.probe_heading = wrap_pi(heading_rad + self._probe_side(heading_rad, p_ned) * PROBE_WAY_RAD)
-        if t >= self.probe_until:
-            if self.probe_stop_until is None:
-                self.probe_stop_until, self.probe_heading = t + PROBE_STOP_S, heading_rad
-            if t >= self.probe_stop_until:
-                return None
-            self.asked_heading = self.probe_heading
-            return np.zeros(2), self.probe_heading  # Rover's stop controller, holding the heading
-        self.asked_heading = self.probe_heading  # ahead, velocity only: Rover steers to its direction at its speed
-        v = self.cfg.command.turn_speed_mps * unit(self.probe_heading)
-        return v, None
-
-    def _probe_side(self, heading_rad: float, p_ned: np.ndarray | None) -> float:
-        """+1 (to starboard) or -1: the side of the probe's hard turn whose quarter circle (of ``PROBE_CIRCLE_M``,
-        the turning radius is not known yet) leaves the area by less (a tank's wall may lie just beyond it)."""
-        if p_ned is None:
-            return 1.0
-        h = unit(heading_rad)
-        right = np.array([-h[1], h[0]])
-        theta = np.linspace(0.0, PROBE_WAY_RAD, 10)[:, None]
-        along, aside = PROBE_CIRCLE_M * np.sin(theta) * h, PROBE_CIRCLE_M * (1.0 - np.cos(theta)) * right
-        worst = [float(np.max(self.law.outside_area(p_ned + along + side * aside))) for side in (1.0, -1.0)]
-        return -1.0 if worst[1] < worst[0] else 1.0
+        """The turn probe's setpoint at the start of guiding (guidance/turn_probe.py), None once it is done."""
+        command = self.turn_probe.command(t, heading_rad, p_ned, self.ability, self.water_ned)
+        if command is not None:
+            self.asked_heading = self.turn_probe.heading
+        return command
 
     def lookahead_m(self) -> float | None:
         """The pursuit look-ahead for this boat: for a boat that needs way, at least twice its turning radius
@@ -186,9 +131,10 @@ class Helm:
             return
         water = np.asarray(velocity_ned, dtype=float) - (0.0 if current_ned is None else np.asarray(current_ned))
         u = float(water[0] * math.cos(heading_rad) + water[1] * math.sin(heading_rad))
-        self.water_mps = u
-        self.stopping.update(t, self.stop_asked and not at_edge, u)  # a wall stops a boat too
-        if at_edge:
+        self.water_mps, self.water_ned = u, (None if at_edge else water)  # a wall sets a boat sideways too
+        c = 0.0 if current_ned is None else float(np.asarray(current_ned) @ unit(heading_rad))
+        self.lags.update(t, None if at_edge else self.asked_mps, c, u)  # a wall stops a boat too
+        if at_edge or self.ability.moves_sideways:  # a boat that goes where it is sent turns as it will
             return
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
         self.ability.update(t, asked, u, turn_rate_radps)
@@ -310,14 +256,7 @@ class Helm:
         if not within and (sp.state is not GuidanceState.GUIDING or sp.ground_ned is None):
             return np.asarray(sp.velocity_ned, dtype=float), None
         probe = self.probe(self.t, heading_rad, p_ned) if self.t is not None else None
-        stopping = self.probe_stop_until is not None
-        self.doing = (
-            "following the field"
-            if probe is None
-            else PROBE_STOP_DOING
-            if stopping
-            else PROBE_DOING[self.probe_with_way]
-        )
+        self.doing = "following the field" if probe is None else self.turn_probe.doing
         if probe is not None:
             return probe
         if within:
@@ -356,7 +295,8 @@ class Helm:
         # every 10 s (drifting on it anyway, gyre seeds 31-32 arrived 65 and 62 of 72 times, against 69 without)
         drift, c = (None if self.shearing else c), (None if self.sheared else c)
         self.line.aim(p_ned, self.law.goal_ned, heading_rad, c, drift, self.t if self.arrived else None)
-        self.line.stop_s = self.stopping.tau_s
+        self.line.stop_s = self.lags.stopping.lag_s
+        self.line.capture.lags_s = (self.lags.ahead.lag_s, self.lags.astern.lag_s)
         m = self.line.command(
             p_ned,
             self.law.goal_ned,
@@ -372,10 +312,21 @@ class Helm:
         )
         return self._maneuver(m)
 
-    def sent(self, velocity: tuple[float, float] | None) -> None:
-        """The setpoint velocity that went out this tick [m/s] (None: none): speed 0 is Rover's stop controller,
-        whose run-on :attr:`stopping` learns from."""
-        self.stop_asked = velocity is not None and math.hypot(*velocity) <= 1e-9
+    def sent(self, velocity: tuple[float, float] | None, yaw: float | None = None) -> None:
+        """The setpoint that went out this tick: ``velocity`` [m/s] (None: none) and its ``yaw`` [rad] (None:
+        velocity only, which Rover drives ahead along it): what :attr:`lags` learn the boat's way from."""
+        if velocity is None:
+            self.asked_mps = self.sent_ned = None
+            return
+        v = self.sent_ned = np.asarray(velocity, dtype=float)
+        self.asked_mps = float(np.hypot(*v)) if yaw is None else float(v @ unit(yaw))
+
+    def water_sent(self) -> np.ndarray | None:
+        """The boat's velocity through the water as sent [m/s], for a boat that goes where it is sent (none sent:
+        at rest in the water); None for any other boat, whose slip measures the current."""
+        if not self.ability.moves_sideways:
+            return None
+        return np.zeros(2) if self.sent_ned is None else self.sent_ned
 
     def _maneuver(self, m: Maneuver) -> Command:
         """Ahead (a positive speed over ground along the heading) goes as velocity only, which Rover reads the same

@@ -110,10 +110,8 @@ class Supervisor:
                 self._note(logging.WARNING, f"vehicle heartbeat gap of {gap:.1f} s; requesting telemetry again")
         self.heartbeat_wall, self.mode, self.armed = hb.wall_s, hb.mode, hb.armed
         if first:
-            self._note(
-                logging.INFO,
-                f"vehicle heartbeat: mode {rover.mode_name(hb.mode)}, {'armed' if hb.armed else 'disarmed'}",
-            )
+            armed = "armed" if hb.armed else "disarmed"
+            self._note(logging.INFO, f"vehicle heartbeat: mode {rover.mode_name(hb.mode)}, {armed}")
         if hb.mode == rover.GUIDED:
             self.reclaim = False
             if not self.engaged:
@@ -132,9 +130,11 @@ class Supervisor:
         return True
 
     def update_current(self, t: float) -> None:
-        """After the command: the fix at ``t`` into the current (all of it while disarmed), unless at the edge."""
-        if not self.helm.at_edge(self.vehicle.tracker.predict(t)[0]):  # a wall's slip is not the current's
-            self.vehicle.update_current(t, drifting=self.armed is False)
+        """After the command: the fix at ``t`` into the current (all of it while disarmed; less the velocity sent to a
+        boat that goes where it is sent, whose slip is its motion), unless at the edge (a wall's slip)."""
+        if not self.helm.at_edge(self.vehicle.tracker.predict(t)[0]):
+            drifting = self.armed is False
+            self.vehicle.update_current(t, drifting, None if drifting else self.helm.water_sent())
 
     def on_clock_restart(self, restart: ev.ClockRestart) -> None:
         what = "went back (a reboot)" if restart.rebooted else "jumped forward"
@@ -216,14 +216,8 @@ class Supervisor:
             return self._handed_over(now, wall, requests)
         if not in_guided:
             if self.engaged and not self.reclaim:
-                return self._out(
-                    ZERO,
-                    S.WAITING,
-                    f"vehicle left GUIDED (now {rover.mode_name(self.mode)}); not taking it back",
-                    False,
-                    now,
-                    requests,
-                )
+                why = f"vehicle left GUIDED (now {rover.mode_name(self.mode)}); not taking it back"
+                return self._out(ZERO, S.WAITING, why, False, now, requests)
             requests += self.schedule.once_per_retry("mode", ev.SetMode(rover.GUIDED), wall)
             return self._out(ZERO, S.WAITING, "switching the vehicle to GUIDED", False, now, requests)
         if not self.armed:
@@ -245,10 +239,12 @@ class Supervisor:
         p, v_est = self.vehicle.tracker.predict(now + cfg.command.lead_s)
         heading = self.vehicle.heading_at(now)
         estimator = self.vehicle.current
-        current = estimator.current_ned if heading is not None and estimator.updates else None
+        sideways = self.helm.ability.moves_sideways  # its heading tells nothing of how it moves (update_current)
+        current = estimator.current_ned if (heading is not None or sideways) and estimator.updates else None
         rate = self.vehicle.attitude[2] if heading is not None and self.vehicle.attitude else None
         edge = self.helm.at_edge(p)
         self.helm.observe(now, heading, rate, v_est, current, estimator.seen_std_mps, estimator.shear_weight, edge)
+        heading = None if self.helm.ability.moves_sideways else heading
         self.helm.in_company = self.cfg.fleet.enabled and bool(self.neighbours.latest)
         distance = law.distance_to_goal(p)
         if self.arrived:
@@ -354,9 +350,9 @@ class Supervisor:
             v, reason, yaw = self._keep_separation(v, reason, t, yaw)
         self._set_state(state, reason, t)
         velocity = (float(v[0]), float(v[1])) if send else None
-        self.helm.sent(velocity)
         guided = yaw if state in (S.GUIDING, S.ARRIVED) else None
         yaw = None if velocity is None else self.helm.yaw_for(velocity, guided, self.vehicle.heading_rad)
+        self.helm.sent(velocity, yaw)
         return ev.Decision(velocity, yaw, state, reason, self.degraded and state is S.GUIDING, tuple(requests))
 
     def _keep_separation(

@@ -166,7 +166,8 @@ def test_a_disarmed_boat_drifting_measures_the_whole_current_at_once() -> None:
 
 
 def test_the_turn_probe_tells_a_boat_that_turns_in_place_from_one_that_needs_way(law: GuidanceLaw) -> None:
-    from koopguide.guidance.helm import PROBE_RAD, PROBE_STOP_S, Helm
+    from koopguide.guidance.helm import Helm
+    from koopguide.guidance.turn_probe import PROBE_RAD, PROBE_STOP_S
 
     cfg = guidance_settings.load()
     skid = Helm(cfg, law)
@@ -224,7 +225,7 @@ def test_the_probes_hard_turn_under_way_lasts_its_whole_stage_and_keeps_the_tigh
     cfg = guidance_settings.load()
     stage, u, radius, lag = cfg.command.probe_turn_s, 0.15, 1.2, 1.5  # the boat: [s], [m/s], [m], [s]
     rudder, t, heading = Helm(cfg, law), 0.0, 0.0
-    while not rudder.probe_with_way:  # it does not turn in place
+    while not rudder.turn_probe.with_way:  # it does not turn in place
         rudder.observe(t, heading, 0.0, np.zeros(2), None)
         rudder.probe(t, heading)
         t += 0.05
@@ -247,8 +248,8 @@ def test_the_helm_learns_how_far_the_boat_runs_on_only_from_setpoints_of_speed_0
     """What went out decides: a boat slowing while it was sent speed 0 (Rover's stop controller) is evidence of its
     stopping time; the same slowing under a setpoint with way, or against the area's edge (a wall stops a boat
     too), is none."""
-    from koopguide.guidance.estimation.stopping import PRIOR_S
     from koopguide.guidance.helm import Helm
+    from koopguide.guidance.law.approach_path import STOP_GAIN
 
     cfg = guidance_settings.load()
 
@@ -258,17 +259,97 @@ def test_the_helm_learns_how_far_the_boat_runs_on_only_from_setpoints_of_speed_0
             t = 0.1 * k
             helm.sent(sent)
             helm.observe(t, 0.0, 0.0, np.array([0.2 * math.exp(-t / 3.0), 0.0]), None, at_edge=at_edge)
-        return helm.stopping.tau_s
+        return helm.lags.stopping.lag_s
 
     assert stop((0.0, 0.0), False) == pytest.approx(3.0, rel=0.1)
-    assert stop((0.05, 0.0), False) == pytest.approx(PRIOR_S)  # slowing to a speed asked: not a stop
-    assert stop((0.0, 0.0), True) == pytest.approx(PRIOR_S)  # at the edge
+    assert stop((0.05, 0.0), False) == pytest.approx(1.0 / STOP_GAIN)  # slowing to a speed asked: not a stop
+    assert stop((0.0, 0.0), True) == pytest.approx(1.0 / STOP_GAIN)  # at the edge
+
+
+def test_the_helm_learns_the_lag_astern_from_setpoints_astern_through_the_water(law: GuidanceLaw) -> None:
+    """A velocity + yaw setpoint pointing aft of the yaw asks way astern (Rover reverses): the way gathered then is
+    evidence of the astern lag, with the target through the water (the speed over ground sent less the current along
+    the heading); not of the lag ahead nor of the stopping time. The capture search's model boat takes it on."""
+    from koopguide.guidance.helm import Helm
+    from koopguide.guidance.law.approach_path import STOP_GAIN
+    from koopguide.guidance.law.capture import SPEED_LAG_S
+
+    cfg = guidance_settings.load()
+    helm = Helm(cfg, law)
+    current = np.array([0.03, 0.0])  # toward the north, the way the boat faces: astern it stems it
+    for k in range(240):  # three times 8 s of sternway gathered from rest with a 3 s lag toward 0.12 m/s astern
+        t, run = 0.1 * k, 0.1 * (k % 80)
+        helm.sent((-0.09, 0.0) if run > 0.0 else (0.0, 0.0), 0.0)  # -0.12 through the water + 0.03 of current
+        water = -0.12 * (1.0 - math.exp(-run / 3.0))
+        helm.observe(t, 0.0, 0.0, np.array([water, 0.0]) + current, current)
+    assert helm.lags.astern.lag_s == pytest.approx(3.0, rel=0.15)
+    assert helm.lags.ahead.lag_s == pytest.approx(SPEED_LAG_S)
+    assert helm.lags.stopping.lag_s == pytest.approx(1.0 / STOP_GAIN)
+    helm.observe(8.0, 0.0, 0.0, np.array([-0.1, 0.0]) + current, current, at_edge=False)
+    helm.line.aim(np.array([0.3, 0.0]), law.goal_ned, 0.0, current, current, None)
+    helm._on_line(np.array([0.3, 0.0]), 0.0, current)
+    assert helm.line.capture.lags_s == (helm.lags.ahead.lag_s, helm.lags.astern.lag_s)
+
+
+@settings(max_examples=30, deadline=None)
+@given(heading0=st.floats(-math.pi, math.pi), speed=st.floats(0.08, 0.3), lag=st.floats(0.2, 2.0))
+def test_the_probe_tells_a_boat_that_goes_where_it_is_sent_whatever_its_heading(
+    law: GuidanceLaw, heading0: float, speed: float, lag: float
+) -> None:
+    """A vehicle whose velocity through the water follows the setpoint and whose heading stays put: it does not turn
+    when asked at speed 0 (so it is no boat that turns in place), and in the turn under way it goes where it was
+    sent, across its heading, while its heading does not move. It is then neither taken to need way nor probed
+    further; nor is one whose heading is merely the direction it moves in (it comes round at once). A rudder boat in
+    the same stage goes along its heading as it turns (a 1.2 m circle), and one set against a wall (sideways along
+    it) tells nothing."""
+    from koopguide.guidance.helm import Helm
+
+    cfg = guidance_settings.load()
+
+    def probed(heading_turns: bool, at_edge: bool = False, with_course: bool = False) -> Helm:
+        helm, t, heading = Helm(cfg, law), 0.0, heading0
+        water = np.zeros(2)
+        while t < 3.0 * cfg.command.probe_turn_s:
+            command = helm.probe(t, heading)
+            if command is None:
+                break
+            asked = np.asarray(command[0], dtype=float)  # a velocity-only setpoint: Rover's heading and speed
+            if float(np.hypot(*asked)) > 0.0:
+                asked = asked / float(np.hypot(*asked)) * speed
+            water = water + (asked - water) * min(1.0, 0.05 / lag)
+            rate = 0.0
+            if with_course and float(np.hypot(*water)) > 0.02:  # its heading is the direction it moves in
+                turned = wrap_pi(math.atan2(water[1], water[0]) - heading)
+                heading, rate = wrap_pi(heading + turned), turned / 0.05
+            elif heading_turns and float(np.hypot(*water)) > 0.02:  # a rudder boat: its way along its heading
+                rate = (
+                    float(np.hypot(*water))
+                    / 1.2
+                    * math.copysign(1.0, wrap_pi(math.atan2(asked[1], asked[0]) - heading))
+                )
+                heading = wrap_pi(heading + rate * 0.05)
+                water = float(np.hypot(*water)) * np.array([math.cos(heading), math.sin(heading)])
+            helm.observe(t, heading, rate, water, None, at_edge=at_edge)
+            t += 0.05
+        return helm
+
+    follower = probed(False)
+    assert follower.ability.moves_sideways and not follower.ability.needs_way
+    assert follower.probe(100.0, heading0) is None  # probed no further
+    assert follower.on_station(None)  # the distance alone decides its arrival
+    rudder = probed(True)
+    assert rudder.ability.needs_way and not rudder.ability.moves_sideways
+    walled = probed(False, at_edge=True)
+    assert not walled.ability.moves_sideways
+    coursing = probed(False, with_course=True)  # a circle of a few centimetres: no rudder boat's
+    assert coursing.ability.moves_sideways and not coursing.ability.needs_way
 
 
 def test_the_probes_hard_turn_goes_to_the_side_that_stays_inside_the_area(law: GuidanceLaw) -> None:
     """Heading south 0.1 m inside the domain's east edge (the goal's side), a turn to port would run into the
     wall beyond it; the probe turns to starboard (west). Near the west edge it turns to port (east)."""
-    from koopguide.guidance.helm import PROBE_WAY_RAD, Helm
+    from koopguide.guidance.helm import Helm
+    from koopguide.guidance.turn_probe import PROBE_WAY_RAD
 
     cfg = guidance_settings.load()
     south = math.pi
@@ -278,7 +359,7 @@ def test_the_probes_hard_turn_goes_to_the_side_that_stays_inside_the_area(law: G
             rudder.observe(0.05 * k, south, 0.0, np.zeros(2), None)
             command = rudder.probe(0.05 * k, south, p)
         assert rudder.ability.needs_way and command is not None
-        assert rudder.probe_heading == pytest.approx(wrap_pi(south + side * PROBE_WAY_RAD))
+        assert rudder.turn_probe.heading == pytest.approx(wrap_pi(south + side * PROBE_WAY_RAD))
 
 
 def test_in_sheared_water_the_holding_line_is_the_still_water_one_for_the_rest_of_the_mission(

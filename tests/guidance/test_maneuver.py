@@ -415,7 +415,7 @@ def test_a_held_current_line_turns_slowly_toward_the_estimate_and_a_line_not_hel
 
 @pytest.mark.parametrize("stop_s", [1.0 / STOP_GAIN, 3.0, 6.0])
 def test_a_boat_slow_to_stop_is_ramped_onto_the_goal_no_faster_than_it_can_stop(stop_s: float) -> None:
-    """From speed u a boat told to stop runs on about u tau (estimation/stopping.py): the line's feedback and the
+    """From speed u a boat told to stop runs on about u tau (estimation/speed_lag.py): the line's feedback and the
     planned approach's runs ask at most distance / tau, so a heavy hull does not run past the goal (one of twice the
     mass with a weak astern ran 0.2 m past it on the ramps made for the simulator's boats)."""
     line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.25)

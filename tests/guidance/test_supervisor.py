@@ -82,10 +82,12 @@ class Bench:
         heartbeat_every_s: float = 1.0,
         response: float = 1.0,
         attitude: bool = True,
+        turns: bool = True,
     ):
         """Fix, attitude, decision, move: ``seconds`` of vehicle time; the decisions. The boat makes good
         ``response`` times the setpoint through the water (1: exactly the setpoint), its bow to the setpoint's yaw
-        when it has one, else along the setpoint. ``attitude`` False: no ATTITUDE is sent (stale, or none)."""
+        when it has one, else along the setpoint (``turns`` False: its heading never moves). ``attitude`` False: no
+        ATTITUDE is sent (stale, or none)."""
         decisions = []
         next_hb = self.t
         for _ in range(round(seconds / DT)):
@@ -100,9 +102,9 @@ class Bench:
                 self.sup.setpoint_sent(self.t)
                 if obey:
                     self.v = response * np.array(d.velocity_ned) + np.asarray(current)
-                    if d.yaw_rad is not None:  # velocity + yaw: the bow to the yaw, as Rover steers it (astern too)
-                        self.heading = d.yaw_rad
-                    elif math.hypot(*d.velocity_ned) > 1e-9:
+                    if turns and d.yaw_rad is not None:  # velocity + yaw: the bow to the yaw, as Rover steers it
+                        self.heading = d.yaw_rad  # (astern too)
+                    elif turns and math.hypot(*d.velocity_ned) > 1e-9:
                         self.heading = math.atan2(d.velocity_ned[1], d.velocity_ned[0])
             if not obey:
                 self.v = np.asarray(current, dtype=float)
@@ -369,6 +371,28 @@ def test_out_of_bounds_inputs_are_rejected_counted_and_logged_once_a_second(benc
     assert bench.sup.vehicle.heading_rad == pytest.approx(bench.reported_heading)
     bench.sup.handle(InputRejected(bench.wall, "timestamp", "LOCAL_POSITION_NED time_boot_ms 4000000000"))
     assert counts["timestamp"] == 1
+
+
+def test_a_boat_that_goes_where_it_is_sent_whatever_its_heading_gets_velocities_and_its_current_measured(
+    bench: Bench,
+) -> None:
+    """The bench's boat with its heading fixed: asked at speed 0 to turn, it does not; asked a turn under way, it
+    goes where it was sent, across its heading. Its slip is its motion, not the current: the current is measured as
+    its ground velocity less the velocity sent, and it is guided by velocities (no heading), arriving on the
+    distance alone and keeping station against the current."""
+    east = np.array([0.0, 0.03])
+    decisions = bench.fly(12.0, current=east, turns=False)
+    helm = bench.sup.helm
+    assert helm.ability.moves_sideways and not helm.ability.needs_way
+    decisions += bench.fly(60.0, current=east, turns=False)
+    assert np.allclose(bench.sup.vehicle.current.current_ned, east, atol=0.006)
+    guided = [d for d in decisions[round(12.0 / DT) :] if d.velocity_ned is not None]
+    assert all(d.yaw_rad is None or math.hypot(*d.velocity_ned) <= 1e-9 for d in guided)  # velocities only
+    arrived = [k for k, d in enumerate(decisions) if d.state is S.ARRIVED]
+    assert arrived and arrived[0] * DT < 60.0
+    held = bench.fly(30.0, current=east, turns=False)
+    assert all(d.state is S.ARRIVED for d in held)
+    assert math.hypot(*bench.p) <= bench.cfg.arrival.radius_m
 
 
 def test_the_current_estimate_is_reset_when_it_leaves_its_bounds(bench: Bench) -> None:

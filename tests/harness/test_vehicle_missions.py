@@ -19,6 +19,7 @@ import pytest
 from koopguide.base import data
 from koopguide.guidance.settings import GuidanceConfig
 from koopguide.harness import mission
+from tests.support import velocity_follower
 
 SPEEDUP = 10.0  # mission.fly_paced flies a run again slower if the simulator could not keep this pace
 START = 1  # the Zshape demo start the CI flies (the campaign covers the others and random ones)
@@ -98,7 +99,7 @@ def test_a_heavier_weaker_skid_steer_boat_arrives_and_keeps_station_too(
 # A heavier rudder boat: twice the mass and yaw inertia, 20% less thrust ahead and 45% less astern. Told to stop
 # it runs on about 3 s times its speed (the simulator's, 1.7 s): on ramps made for the simulator's boats it ran
 # 0.2 m past the goal and held 0.18-0.23 m toward N (5 of 7 demo starts over the bound); ramps from its stopping
-# time learned in the turn probe (estimation/stopping.py), 0.10-0.16 m.
+# time learned in the turn probe (estimation/speed_lag.py), 0.10-0.16 m.
 HEAVY_RUDDER = {
     "vehicle": "rudder",
     "vessel": {
@@ -121,6 +122,23 @@ def test_a_heavier_rudder_boat_does_not_run_past_the_goal(zshape_model: Path) ->
     )
     result = asyncio.run(mission.fly_paced(cfg, zshape_model, sim_cfg, ARRIVE_S, settle_s=HOLD_S))
     assert_arrives_and_holds(cfg, result, f"heavy rudder boat from start {start}, current toward {toward}")
+
+
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize(("heading", "toward"), [("fixed", "N"), ("fixed", "W"), ("asked", "E"), ("course", "W")])
+def test_a_vehicle_whose_velocity_through_the_water_follows_the_setpoint_arrives_and_keeps_station(
+    zshape_model: Path, monkeypatch: pytest.MonkeyPatch, heading: str, toward: str
+) -> None:
+    """Issue 10's first vehicle, independent of the simulator's hulls (tests/support/velocity_follower.py): it goes
+    where it is sent, holonomically. One whose heading stays where it started was taken for a rudder boat (it did
+    not turn when asked), steered by that heading onto lines it never turned to, and arrived in 0 of 12 missions
+    (Zshape starts 0, 3 and 6 x 4 currents); the turn probe now sees it go across its heading, and it is sent
+    velocities, its current measured as its ground velocity less the velocity sent. So is one whose heading is the
+    direction it moves in (held as a rudder boat, it flipped end for end when sent astern, 10 of 12). One that turns
+    to the heading asked is a boat that turns in place."""
+    velocity_follower.install(monkeypatch, heading=heading)
+    cfg, result = fly_from_demo_start(zshape_model, 3, toward, f"follow{heading[0]}{toward}", {"vehicle": "vectored"})
+    assert_arrives_and_holds(cfg, result, f"velocity follower (heading {heading}), current toward {toward}")
 
 
 def assert_arrives_and_holds(cfg: GuidanceConfig, result: mission.MissionResult, label: str) -> None:

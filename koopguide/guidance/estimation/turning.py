@@ -5,6 +5,10 @@ single propeller and a rudder turns only with way through the water (its rudder 
 through the water; docs/rover.md, docs/guidance.md "Any boat"). Both are read from what the boat does when
 asked to turn, i.e. while the heading it was sent differs from its heading by more than ``ASKED_RAD``:
 
+* moves sideways (set by the helm's turn probe, guidance/helm.py): asked a hard turn under way, it went where it
+  was sent through the water, across its heading, and its heading did not move (or came round at once, a circle no
+  rudder boat turns): a vehicle whose velocity follows the setpoint while its heading does not, or is merely the
+  direction it moves in; its heading then tells nothing about how it moves;
 * turns in place: it turned faster than ``PIVOT_RATE`` while slower than ``STILL_MPS`` through the water, for
   ``PIVOT_S`` in a row (not the moment a boat reversing from ahead to astern passes through zero speed);
 * needs way: it stayed below ``STUCK_RATE`` while slower than ``SLOW_MPS`` for ``STUCK_S`` in a row
@@ -48,6 +52,7 @@ class TurnAbility:
 
     def __init__(self) -> None:
         self.needs_way = False  # the boat does not turn without way through the water (seen, not assumed)
+        self.moves_sideways = False  # it goes where it is sent whatever its heading (seen by the helm's probe)
         self.pivot_seen = False
         self.turn_rate = RATE_FLOOR  # [rad/s]
         self.radius_m: float | None = None  # turning radius at speed [m]; None before a turn at speed

@@ -14,9 +14,9 @@ horizon, as in model-predictive control with motion primitives: Frazzoli, Dahleh
 motion planning for nonlinear systems with symmetries"): each manoeuvre lasts ``STEP_S``, ahead or astern at
 ``speed`` through the water with the rudder hard over either way or amidships, or drifting (speed 0, Rover's
 stop controller); every sequence is simulated on a kinematic model of the boat (a circle of radius R through the
-water, first-order speed lag ``SPEED_LAG_S``) carried by the current estimate, and scored where it ends each
-manoeuvre by how far it is from holding (off the line, off the goal, the bow off the line, way left on) plus how
-far it strays out of the area the boat may use. The first manoeuvre of the best sequence is driven for its
+water, first-order speed lags ahead and astern, ``lags_s``) carried by the current estimate, and scored where it
+ends each manoeuvre by how far it is from holding (off the line, off the goal, the bow off the line, way left on)
+plus how far it strays out of the area the boat may use. The first manoeuvre of the best sequence is driven for its
 whole ``STEP_S`` (the boat needs that long to get way on; a search every tick dithers ahead-astern), then the
 search is made again from where the boat is. A boat already out of the area (pressed onto a tank's wall by the
 current) scores every sequence by how far out it ends up, so it comes back in first.
@@ -44,7 +44,8 @@ CAPTURE_LEAVE_M = 0.7  # ... until beyond this (hysteresis: at one radius it wen
 STEP_S = 2.0  # one manoeuvre [s]
 HORIZON = 4  # manoeuvres searched ahead
 SIM_DT_S = 0.1  # the model's time step [s]
-SPEED_LAG_S = 1.0  # the speed through the water follows its command with this time constant [s]
+SPEED_LAG_S = 1.0  # the speed through the water follows its command with this time constant [s], or slower ahead or
+# astern as the boat is seen to be (``CaptureSearch.lags_s``, estimation/speed_lag.py)
 TURN_RAD = math.radians(45.0)  # a turning manoeuvre asks for this much off its starting heading (rudder hard over)
 SPEED_MPS = 0.12  # through the water on a manoeuvre (at least WATER_MARGIN_MPS faster than the current) [m/s]
 WATER_MARGIN_MPS = 0.04
@@ -88,6 +89,10 @@ class CaptureSearch:
         self.chosen: tuple[int, int] | None = None  # the manoeuvre under way
         self.heading0 = 0.0  # the heading it began with [rad]
         self.until: float | None = None  # vehicle time it ends [s]
+        # the boat's learned lags (ahead, astern) [s], set by the caller (estimation/speed_lag.py); the model takes
+        # the slower of each and SPEED_LAG_S, the lag the search was made with (what else delays the way, such as
+        # the autopilot's speed loop, is not in the fit)
+        self.lags_s = (SPEED_LAG_S, SPEED_LAG_S)
         seqs = np.array(list(itertools.product(range(len(MANEUVERS)), repeat=HORIZON)))  # (S, HORIZON)
         table = np.array(MANEUVERS, dtype=float)
         self._direction = table[seqs, 0]  # (S, HORIZON)
@@ -165,9 +170,12 @@ class CaptureSearch:
         def ground(psi, u):  # the velocity over ground (S, 2) of way u along headings psi, carried by the current
             return u[:, None] * np.stack([np.cos(psi), np.sin(psi)], axis=1) + c
 
+        ahead, astern = (max(SPEED_LAG_S, lag) for lag in self.lags_s)
+
         def drive(pos, psi, u, target, rudder, seconds):  # the model over ``seconds``: Euler steps of SIM_DT_S
+            lag = np.where(target > 0.0, ahead, np.where(target < 0.0, astern, SPEED_LAG_S))
             for _ in range(round(seconds / SIM_DT_S)):
-                u = u + (target - u) * (SIM_DT_S / SPEED_LAG_S)
+                u = u + (target - u) * (SIM_DT_S / lag)
                 psi = psi + rudder * np.abs(u) / radius * SIM_DT_S  # Rover turns toward the asked heading
                 pos = pos + ground(psi, u) * SIM_DT_S
             return pos, psi, u

@@ -40,7 +40,7 @@ turn (the autopilot reverses the rudder astern, docs/rover.md). Four modes, one 
   corner for a minute, its bow never turning: every reversal holds the heading). After a reversal the heading is
   held until the water passes the rudder the new way (before that the rudder turns the boat the wrong way);
 * the speed over ground along the heading: at least the way the rudder needs (``way_mps``) while turning,
-  else ``gain`` (at most 1 / the boat's stopping time ``stop_s``, estimation/stopping.py; so do the planned
+  else ``gain`` (at most 1 / the boat's stopping time ``stop_s``, estimation/speed_lag.py; so do the planned
   approach's runs) times the distance to the goal plus the station keeper's integral term along the heading
   (PI with anti-windup, law/station.py: what holds a boat whose speed loop is not over ground); in a
   current, a speed that would move the boat over ground one way while the water passes the rudder the
@@ -119,7 +119,7 @@ class LineApproach:
         self.cycle = CreepCycle(TURNING_RAD, gain_per_s)  # holding in a current: creeps upstream about the goal
         self.drift: np.ndarray | None = None  # the current the capture search's model boat drifts on [m/s]
         self.aim_t: float | None = None  # vehicle time of the last aim [s]
-        self.stop_s = 1.0 / STOP_GAIN  # the boat's stopping time, set by the caller (estimation/stopping.py) [s]
+        self.stop_s = 1.0 / STOP_GAIN  # the boat's stopping time, set by the caller (estimation/speed_lag.py) [s]
 
     def reset(self) -> None:
         self.axis_rad, self.astern, self.in_current, self.travel, self.pivot = None, False, False, None, None

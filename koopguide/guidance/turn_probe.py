@@ -1,0 +1,133 @@
+"""TurnProbe: at the start of guiding, asks the boat to turn and to stop, to tell how it turns (pure, no I/O).
+
+The service does not know the boat it steers (docs/guidance.md "Any boat"). For up to ``command.probe_turn_s`` it
+sends speed 0 at a heading ``PROBE_RAD`` off the boat's (velocity + yaw; Rover turns a skid-steer boat on the spot,
+a rudder boat not at all):
+
+1. a boat whose heading moves ``PROBE_MOVED_RAD`` turns in place; one whose heading does not move needs way;
+2. the latter is asked a hard turn under way (``PROBE_WAY_RAD`` off, at ``command.turn_speed_mps``) for as long
+   again, which measures its turning circle (estimation/turning.py), to the side whose circle stays more inside the
+   area. The whole turn: the circle is the tightest seen in it, and the first reading (1.5 s in, the turn still
+   tightening) was 2-9 m against the rudder boat's 1.1-1.5 m. A boat that meanwhile goes where it was sent, across
+   its heading (``SIDEWAYS_RAD``, at ``SIDEWAYS_MPS`` or more), its heading still where the probe began, is no
+   rudder boat: its velocity follows the setpoint and its heading does not (taken for a rudder boat, it was steered
+   by its heading onto lines it never turned to: 0 of 12 Zshape missions arrived). So is one whose heading comes
+   round to the turn asked within ``COURSE_S``, a circle no rudder boat turns: its heading is the direction it
+   moves in (astern, it flipped end for end, and held as a rudder boat it shuttled 0.1-0.35 m about the goal). The
+   probe ends there;
+3. then, with the way that turn gave it, speed 0 at its heading for ``PROBE_STOP_S``: how far it runs on
+   (estimation/speed_lag.py; a hull of twice the mass with a weak astern ran 0.2 m past the goal on ramps made for
+   the simulator's, and nothing else tells the service before the boat is first stopped, at the goal).
+
+Conventions: NED velocities ``(2,)`` [m/s], headings [rad] from north, vehicle seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from koopguide.guidance.estimation.turning import TurnAbility
+from koopguide.guidance.law.maneuver import unit, wrap_pi
+from koopguide.guidance.settings import CommandSettings
+
+PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.probe_turn_s)
+PROBE_MOVED_RAD = math.radians(10.0)  # the heading moved this much in the probe: the boat turns in place
+PROBE_WAY_RAD = math.radians(90.0)  # ... and the turn under way asked of a boat that needs way, for its circle
+PROBE_CIRCLE_M = 1.5  # ... to the side where a circle this wide stays more inside the area [m]
+PROBE_STOP_S = 2.5  # ... and then a stop under way asked of it, for how far it runs on [s]
+SIDEWAYS_MPS = 0.06  # in the turn under way, a boat this fast through the water ... [m/s]
+SIDEWAYS_RAD = math.radians(45.0)  # ... this far across its heading (which has not moved) goes where it is sent
+COURSE_S = 2.0  # a boat whose heading is within PROBE_MOVED_RAD of the turn asked under way this soon turns with its
+# course: 90 deg at turn_speed_mps (0.15 m/s) in 2 s is a circle under 0.2 m, half a hull's length, no rudder boat's [s]
+PROBE_DOING = {
+    False: "asking a turn in place to tell how the boat turns",
+    True: "asking a hard turn under way to measure its turning circle",
+}
+PROBE_STOP_DOING = "asking a stop under way to measure how far it runs on"
+Command = tuple[np.ndarray, float | None]  # (velocity NED [m/s], yaw [rad] or None for velocity only)
+
+
+class TurnProbe:
+    """Call :meth:`command` each tick until it returns None; it writes what it sees into the boat's ability."""
+
+    def __init__(self, cfg: CommandSettings, outside: Callable[[np.ndarray], np.ndarray]) -> None:
+        self.cfg = cfg
+        self.outside = outside  # how far points (K, 2) lie outside the area the boat may use [m]
+        self.until: float | None = None  # vehicle time the stage under way ends [s]
+        self.heading: float | None = None  # the heading it asks [rad]
+        self.began: float | None = None  # the boat's heading when it began [rad]
+        self.with_way = False  # the second stage (a boat that needs way: a hard turn under way) ...
+        self.way_began: float | None = None  # ... began at this vehicle time [s]
+        self.stop_until: float | None = None  # ... the third, a stop under way: until this vehicle time [s]
+
+    @property
+    def doing(self) -> str:
+        """What the stage under way asks (for the status's reason)."""
+        return PROBE_STOP_DOING if self.stop_until is not None else PROBE_DOING[self.with_way]
+
+    def command(
+        self,
+        t: float,
+        heading_rad: float | None,
+        p_ned: np.ndarray | None,
+        ability: TurnAbility,
+        water_ned: np.ndarray | None,
+    ) -> Command | None:
+        """The probe's setpoint at vehicle time ``t``, None once done (or off, or no heading known). ``p_ned``: the
+        boat's position [m] (None: the turn under way goes to starboard); ``water_ned``: its velocity through the
+        water [m/s] (None: not known, or at the area's edge, where a wall sets any boat sideways)."""
+        a = ability
+        if heading_rad is None or a.pivot_seen or a.moves_sideways:
+            return None
+        if self.until is None:
+            self.until, self.began = t + self.cfg.probe_turn_s, heading_rad
+            self.heading = wrap_pi(heading_rad + PROBE_RAD)
+        if not self.with_way:
+            if abs(wrap_pi(heading_rad - self.began)) >= PROBE_MOVED_RAD:
+                a.pivot_seen, a.needs_way = True, False  # it turned without way: it turns in place
+                return None
+            if t < self.until:
+                return np.zeros(2), self.heading
+            if self.cfg.probe_turn_s <= 0.0:
+                return None
+            a.needs_way, self.with_way, self.way_began = True, True, t  # it did not turn: it needs way
+            self.until = t + self.cfg.probe_turn_s
+            self.heading = wrap_pi(heading_rad + self._side(heading_rad, p_ned) * PROBE_WAY_RAD)
+        if self.stop_until is None and (self._sideways(heading_rad, water_ned) or self._with_course(t, heading_rad)):
+            a.moves_sideways, a.needs_way = True, False
+            return None
+        if t >= self.until:
+            if self.stop_until is None:
+                self.stop_until, self.heading = t + PROBE_STOP_S, heading_rad
+            if t >= self.stop_until:
+                return None
+            return np.zeros(2), self.heading  # Rover's stop controller, holding the heading
+        return self.cfg.turn_speed_mps * unit(self.heading), None  # velocity only: Rover steers to it at its speed
+
+    def _sideways(self, heading_rad: float, water_ned: np.ndarray | None) -> bool:
+        """The boat goes through the water across its heading, which has not moved from where the probe began."""
+        if water_ned is None or float(np.hypot(*water_ned)) < SIDEWAYS_MPS:
+            return False
+        across = abs(wrap_pi(math.atan2(water_ned[1], water_ned[0]) - heading_rad)) >= SIDEWAYS_RAD
+        return across and abs(wrap_pi(heading_rad - self.began)) < PROBE_MOVED_RAD
+
+    def _with_course(self, t: float, heading_rad: float) -> bool:
+        """Its heading came round to the turn asked under way within ``COURSE_S``: it turns with its course (a vehicle
+        whose velocity follows the setpoint and whose heading is the direction it moves in, astern too)."""
+        turned = abs(wrap_pi(heading_rad - self.heading)) < PROBE_MOVED_RAD
+        return turned and self.way_began is not None and t - self.way_began <= COURSE_S
+
+    def _side(self, heading_rad: float, p_ned: np.ndarray | None) -> float:
+        """+1 (to starboard) or -1: the side of the hard turn whose quarter circle (of ``PROBE_CIRCLE_M``, the turning
+        radius is not known yet) leaves the area by less (a tank's wall may lie just beyond it)."""
+        if p_ned is None:
+            return 1.0
+        h = unit(heading_rad)
+        right = np.array([-h[1], h[0]])
+        theta = np.linspace(0.0, PROBE_WAY_RAD, 10)[:, None]
+        along, aside = PROBE_CIRCLE_M * np.sin(theta) * h, PROBE_CIRCLE_M * (1.0 - np.cos(theta)) * right
+        worst = [float(np.max(self.outside(p_ned + along + side * aside))) for side in (1.0, -1.0)]
+        return -1.0 if worst[1] < worst[0] else 1.0
