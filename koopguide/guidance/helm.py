@@ -34,7 +34,7 @@ from koopguide.guidance.law.command import (
 from koopguide.guidance.law.line_approach import DEFAULT_RADIUS_M, LineApproach
 from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, unit, wrap_pi
 from koopguide.guidance.settings import GuidanceConfig
-from koopguide.guidance.turn_probe import TurnProbe
+from koopguide.guidance.turn_probe import Command, TurnProbe
 
 LINE_CURRENT_SIGMAS = 2.0  # a current estimate this many of its standard deviations strong sets the holding line
 LINE_DOING = "making for the line it can hold the goal on"  # near the goal, a boat that needs way, off its line
@@ -42,7 +42,6 @@ LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this m
 LINE_LEAVE = 1.25  # ... and goes back to following the field only beyond this many times that distance
 SHEARED_WEIGHT = 0.5  # the current estimator's shear weight beyond which the water is sheared (estimation/current.py)
 EDGE_INSET_M = 0.05  # a boat this close to the area's edge (a tank's wall, a bank) slips by it, not the current [m]
-Command = tuple[np.ndarray, float | None]  # (velocity NED [m/s], yaw [rad] or None for velocity only)
 
 
 class Helm:

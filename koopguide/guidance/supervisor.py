@@ -244,7 +244,7 @@ class Supervisor:
         rate = self.vehicle.attitude[2] if heading is not None and self.vehicle.attitude else None
         edge = self.helm.at_edge(p)
         self.helm.observe(now, heading, rate, v_est, current, estimator.seen_std_mps, estimator.shear_weight, edge)
-        heading = None if self.helm.ability.moves_sideways else heading
+        heading = None if sideways else heading
         self.helm.in_company = self.cfg.fleet.enabled and bool(self.neighbours.latest)
         distance = law.distance_to_goal(p)
         if self.arrived:

@@ -5,7 +5,7 @@ single propeller and a rudder turns only with way through the water (its rudder 
 through the water; docs/rover.md, docs/guidance.md "Any boat"). Both are read from what the boat does when
 asked to turn, i.e. while the heading it was sent differs from its heading by more than ``ASKED_RAD``:
 
-* moves sideways (set by the helm's turn probe, guidance/helm.py): asked a hard turn under way, it went where it
+* moves sideways (set by the turn probe, guidance/turn_probe.py): asked a hard turn under way, it went where it
   was sent through the water, across its heading, and its heading did not move (or came round at once, a circle no
   rudder boat turns): a vehicle whose velocity follows the setpoint while its heading does not, or is merely the
   direction it moves in; its heading then tells nothing about how it moves;
