@@ -63,7 +63,7 @@ class Helm:
         )
         self.speed_mps = 0.0  # the boat's ground speed at the last observation [m/s]
         self.water_mps = 0.0  # ... and its speed through the water along its heading (negative: astern) [m/s]
-        self.water_ned: np.ndarray | None = None  # ... its velocity through the water [m/s]
+        self.ground_ned: np.ndarray | None = None  # ... its ground velocity (None at the area's edge) [m/s]
         self.t: float | None = None  # vehicle time of the last observation [s]
         self.current_ned: np.ndarray | None = None  # the current estimate [m/s]
         self.current_std = 0.0  # the current estimate's spread [m/s]
@@ -90,7 +90,7 @@ class Helm:
 
     def probe(self, t: float, heading_rad: float | None, p_ned: np.ndarray | None = None) -> Command | None:
         """The turn probe's setpoint at the start of guiding (guidance/turn_probe.py), None once it is done."""
-        command = self.turn_probe.command(t, heading_rad, p_ned, self.ability, self.water_ned)
+        command = self.turn_probe.command(t, heading_rad, p_ned, self.ability, self.ground_ned)
         if command is not None:
             self.asked_heading = self.turn_probe.heading
         return command
@@ -130,7 +130,8 @@ class Helm:
             return
         water = np.asarray(velocity_ned, dtype=float) - (0.0 if current_ned is None else np.asarray(current_ned))
         u = float(water[0] * math.cos(heading_rad) + water[1] * math.sin(heading_rad))
-        self.water_mps, self.water_ned = u, (None if at_edge else water)  # a wall sets a boat sideways too
+        self.water_mps = u
+        self.ground_ned = None if at_edge else np.asarray(velocity_ned, dtype=float)  # a wall sets a boat sideways
         c = 0.0 if current_ned is None else float(np.asarray(current_ned) @ unit(heading_rad))
         self.lags.update(t, None if at_edge else self.asked_mps, c, u)  # a wall stops a boat too
         if at_edge or self.ability.moves_sideways:  # a boat that goes where it is sent turns as it will

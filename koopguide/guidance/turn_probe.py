@@ -11,10 +11,16 @@ a rudder boat not at all):
    tightening) was 2-9 m against the rudder boat's 1.1-1.5 m. A boat that meanwhile goes where it was sent, across
    its heading (``SIDEWAYS_RAD``, at ``SIDEWAYS_MPS`` or more), its heading still where the probe began, is no
    rudder boat: its velocity follows the setpoint and its heading does not (taken for a rudder boat, it was steered
-   by its heading onto lines it never turned to: 0 of 12 Zshape missions arrived). So is one whose heading comes
-   round to the turn asked within ``COURSE_S``, a circle no rudder boat turns: its heading is the direction it
-   moves in (astern, it flipped end for end, and held as a rudder boat it shuttled 0.1-0.35 m about the goal). The
-   probe ends there;
+   by its heading onto lines it never turned to: 0 of 12 Zshape missions arrived). What is read is the change of
+   its velocity over ground since the turn began, the way it was sent (within ``SENT_RAD``), for ``SIDEWAYS_S`` in
+   a row: the current's part cancels out, where the current estimate would not serve. A rudder boat at rest in
+   sheared water, its current estimate 0.05 m/s off, read through it as going across its heading one tick into the
+   turn, was guided as a follower, by velocities, and pinned bow-on to a wall by the double gyre it never turned off
+   it; and the estimate soaks up a slow follower's motion as slip (2 s lag: read at 0.068 m/s at most, then
+   sinking), stop 42. So is one whose
+   heading comes round to the turn asked within ``COURSE_S``, a circle no rudder boat turns: its heading is the
+   direction it moves in (astern, it flipped end for end, and held as a rudder boat it shuttled 0.1-0.35 m about
+   the goal). The probe ends there;
 3. then, with the way that turn gave it, speed 0 at its heading for ``PROBE_STOP_S``: how far it runs on
    (estimation/speed_lag.py; a hull of twice the mass with a weak astern ran 0.2 m past the goal on ramps made for
    the simulator's, and nothing else tells the service before the boat is first stopped, at the goal).
@@ -40,6 +46,8 @@ PROBE_CIRCLE_M = 1.5  # ... to the side where a circle this wide stays more insi
 PROBE_STOP_S = 2.5  # ... and then a stop under way asked of it, for how far it runs on [s]
 SIDEWAYS_MPS = 0.06  # in the turn under way, a boat this fast through the water ... [m/s]
 SIDEWAYS_RAD = math.radians(45.0)  # ... this far across its heading (which has not moved) goes where it is sent
+SENT_RAD = math.radians(45.0)  # ... when it goes within this of the direction sent ...
+SIDEWAYS_S = 0.5  # ... for this long in a row [s]
 COURSE_S = 2.0  # a boat whose heading is within PROBE_MOVED_RAD of the turn asked under way this soon turns with its
 # course: 90 deg at turn_speed_mps (0.15 m/s) in 2 s is a circle under 0.2 m, half a hull's length, no rudder boat's [s]
 PROBE_DOING = {
@@ -62,6 +70,8 @@ class TurnProbe:
         self.with_way = False  # the second stage (a boat that needs way: a hard turn under way) ...
         self.way_began: float | None = None  # ... began at this vehicle time [s]
         self.stop_until: float | None = None  # ... the third, a stop under way: until this vehicle time [s]
+        self.ground_began: np.ndarray | None = None  # ... its ground velocity as it began [m/s]
+        self.sideways_since: float | None = None  # ... in which the boat has gone where it was sent since [s]
 
     @property
     def doing(self) -> str:
@@ -74,11 +84,11 @@ class TurnProbe:
         heading_rad: float | None,
         p_ned: np.ndarray | None,
         ability: TurnAbility,
-        water_ned: np.ndarray | None,
+        ground_ned: np.ndarray | None,
     ) -> Command | None:
         """The probe's setpoint at vehicle time ``t``, None once done (or off, or no heading known). ``p_ned``: the
-        boat's position [m] (None: the turn under way goes to starboard); ``water_ned``: its velocity through the
-        water [m/s] (None: not known, or at the area's edge, where a wall sets any boat sideways)."""
+        boat's position [m] (None: the turn under way goes to starboard); ``ground_ned``: its velocity over ground
+        [m/s] (None: not known, or at the area's edge, where a wall sets any boat sideways)."""
         a = ability
         if heading_rad is None or a.pivot_seen or a.moves_sideways:
             return None
@@ -96,7 +106,8 @@ class TurnProbe:
             a.needs_way, self.with_way, self.way_began = True, True, t  # it did not turn: it needs way
             self.until = t + self.cfg.probe_turn_s
             self.heading = wrap_pi(heading_rad + self._side(heading_rad, p_ned) * PROBE_WAY_RAD)
-        if self.stop_until is None and (self._sideways(heading_rad, water_ned) or self._with_course(t, heading_rad)):
+        sideways = self._sideways(t, heading_rad, ground_ned) or self._with_course(t, heading_rad)
+        if self.stop_until is None and sideways:
             a.moves_sideways, a.needs_way = True, False
             return None
         if t >= self.until:
@@ -107,12 +118,21 @@ class TurnProbe:
             return np.zeros(2), self.heading  # Rover's stop controller, holding the heading
         return self.cfg.turn_speed_mps * unit(self.heading), None  # velocity only: Rover steers to it at its speed
 
-    def _sideways(self, heading_rad: float, water_ned: np.ndarray | None) -> bool:
-        """The boat goes through the water across its heading, which has not moved from where the probe began."""
-        if water_ned is None or float(np.hypot(*water_ned)) < SIDEWAYS_MPS:
-            return False
-        across = abs(wrap_pi(math.atan2(water_ned[1], water_ned[0]) - heading_rad)) >= SIDEWAYS_RAD
-        return across and abs(wrap_pi(heading_rad - self.began)) < PROBE_MOVED_RAD
+    def _sideways(self, t: float, heading_rad: float, ground_ned: np.ndarray | None) -> bool:
+        """The boat's velocity over ground has changed since the turn under way began by ``SIDEWAYS_MPS`` or more
+        the way it was sent, across its heading (which has not moved from where the probe began), for
+        ``SIDEWAYS_S`` in a row."""
+        if self.ground_began is None and ground_ned is not None:
+            self.ground_began = np.asarray(ground_ned, dtype=float)
+        change = None if ground_ned is None or self.ground_began is None else ground_ned - self.ground_began
+        going = change is not None and float(np.hypot(*change)) >= SIDEWAYS_MPS
+        if going:
+            direction = math.atan2(change[1], change[0])
+            across = abs(wrap_pi(direction - heading_rad)) >= SIDEWAYS_RAD
+            sent = abs(wrap_pi(direction - self.heading)) <= SENT_RAD
+            going = across and sent and abs(wrap_pi(heading_rad - self.began)) < PROBE_MOVED_RAD
+        self.sideways_since = (t if self.sideways_since is None else self.sideways_since) if going else None
+        return self.sideways_since is not None and t - self.sideways_since >= SIDEWAYS_S
 
     def _with_course(self, t: float, heading_rad: float) -> bool:
         """Its heading came round to the turn asked under way within ``COURSE_S``: it turns with its course (a vehicle

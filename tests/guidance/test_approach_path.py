@@ -292,21 +292,29 @@ def test_the_helm_learns_the_lag_astern_from_setpoints_astern_through_the_water(
 
 
 @settings(max_examples=30, deadline=None)
-@given(heading0=st.floats(-math.pi, math.pi), speed=st.floats(0.08, 0.3), lag=st.floats(0.2, 2.0))
+@given(
+    heading0=st.floats(-math.pi, math.pi),
+    speed=st.floats(0.08, 0.3),
+    lag=st.floats(0.2, 2.0),
+    bias_mps=st.floats(0.0, 0.1),
+    bias_rad=st.floats(-math.pi, math.pi),
+)
 def test_the_probe_tells_a_boat_that_goes_where_it_is_sent_whatever_its_heading(
-    law: GuidanceLaw, heading0: float, speed: float, lag: float
+    law: GuidanceLaw, heading0: float, speed: float, lag: float, bias_mps: float, bias_rad: float
 ) -> None:
     """A vehicle whose velocity through the water follows the setpoint and whose heading stays put: it does not turn
     when asked at speed 0 (so it is no boat that turns in place), and in the turn under way it goes where it was
     sent, across its heading, while its heading does not move. It is then neither taken to need way nor probed
     further; nor is one whose heading is merely the direction it moves in (it comes round at once). A rudder boat in
     the same stage goes along its heading as it turns (a 1.2 m circle), and one set against a wall (sideways along
-    it) tells nothing."""
+    it) tells nothing. All of them in a current of up to 0.1 m/s from any side, of which the service knows nothing
+    yet (a rudder boat at rest in sheared water, read through a wrong estimate as going across its heading, was
+    taken for a follower, stop 42), and the rudder boat also in one that turns as the boat does."""
     from koopguide.guidance.helm import Helm
 
     cfg = guidance_settings.load()
 
-    def probed(heading_turns: bool, at_edge: bool = False, with_course: bool = False) -> Helm:
+    def probed(heading_turns: bool, at_edge: bool = False, with_course: bool = False, swing: float = 0.0) -> Helm:
         helm, t, heading = Helm(cfg, law), 0.0, heading0
         water = np.zeros(2)
         while t < 3.0 * cfg.command.probe_turn_s:
@@ -329,7 +337,8 @@ def test_the_probe_tells_a_boat_that_goes_where_it_is_sent_whatever_its_heading(
                 )
                 heading = wrap_pi(heading + rate * 0.05)
                 water = float(np.hypot(*water)) * np.array([math.cos(heading), math.sin(heading)])
-            helm.observe(t, heading, rate, water, None, at_edge=at_edge)
+            current = bias_mps * unit(bias_rad + swing * wrap_pi(heading - heading0))
+            helm.observe(t, heading, rate, water + current, None, at_edge=at_edge)
             t += 0.05
         return helm
 
@@ -337,8 +346,9 @@ def test_the_probe_tells_a_boat_that_goes_where_it_is_sent_whatever_its_heading(
     assert follower.ability.moves_sideways and not follower.ability.needs_way
     assert follower.probe(100.0, heading0) is None  # probed no further
     assert follower.on_station(None)  # the distance alone decides its arrival
-    rudder = probed(True)
-    assert rudder.ability.needs_way and not rudder.ability.moves_sideways
+    for swing in (0.0, 1.0, -2.0):  # a steady current, or one turning with the boat or against it
+        rudder = probed(True, swing=swing)
+        assert rudder.ability.needs_way and not rudder.ability.moves_sideways
     walled = probed(False, at_edge=True)
     assert not walled.ability.moves_sideways
     coursing = probed(False, with_course=True)  # a circle of a few centimetres: no rudder boat's
