@@ -221,8 +221,8 @@ def rudder_across_its_line(zshape_model: Path) -> Bench:
     bench = Bench(zshape_model, command={"probe_turn_s": 0.0})
     helm, estimator = bench.sup.helm, bench.sup.vehicle.current
     helm.ability.needs_way, helm.ability.radius_m = True, 1.2
-    estimator.kf.x[:] = (0.0, 0.03)
-    estimator.kf.P[:] = estimator.P_seen[:] = np.eye(2) * 1e-6
+    estimator.kf.x[:2] = (0.0, 0.03)
+    estimator.kf.P[:2, :2] = estimator.P_seen[:2, :2] = np.eye(2) * 1e-6
     estimator.updates = 1
     bench.p, bench.heading = np.array([0.08, 0.0]), 0.0
     return bench
