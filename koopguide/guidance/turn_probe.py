@@ -15,12 +15,11 @@ a rudder boat not at all):
    its velocity over ground since the turn began, the way it was sent (within ``SENT_RAD``), for ``SIDEWAYS_S`` in
    a row: the current's part cancels out, where the current estimate would not serve. A rudder boat at rest in
    sheared water, its current estimate 0.05 m/s off, read through it as going across its heading one tick into the
-   turn, was guided as a follower, by velocities, and pinned bow-on to a wall by the double gyre it never turned off
-   it; and the estimate soaks up a slow follower's motion as slip (2 s lag: read at 0.068 m/s at most, then
-   sinking), stop 42. So is one whose
-   heading comes round to the turn asked within ``COURSE_S``, a circle no rudder boat turns: its heading is the
-   direction it moves in (astern, it flipped end for end, and held as a rudder boat it shuttled 0.1-0.35 m about
-   the goal). The probe ends there;
+   turn, was guided as a follower, by velocities, and pinned bow-on to a wall by the double gyre, which it never
+   turned off; and the estimate soaks up a slow follower's motion as slip (2 s lag: read at 0.068 m/s at most, then
+   sinking), stop 42. So is one whose heading comes round to the turn asked within ``COURSE_S``, a circle no rudder
+   boat turns: its heading is the direction it moves in (astern, it flipped end for end, and held as a rudder boat
+   it shuttled 0.1-0.35 m about the goal). The probe ends there;
 3. then, with the way that turn gave it, speed 0 at its heading for ``PROBE_STOP_S``: how far it runs on
    (estimation/speed_lag.py; a hull of twice the mass with a weak astern ran 0.2 m past the goal on ramps made for
    the simulator's, and nothing else tells the service before the boat is first stopped, at the goal).

@@ -37,7 +37,7 @@ long after the turn. So the state is ``(c_N, c_E, kappa_0, kappa_1)`` and the me
 the fast turns whose measurements are skipped too: their sway outlasts them), with the prior ``kappa = 0 +-
 SWAY_PRIOR_S``; the two together stand for a lag of 0 to a second or two. A heavier hull that slips more (2 kg,
 Y_v -3 kg/s) took 0.01 m/s of its slip in the last turn before the goal for current, 23-27 deg of the current's
-direction, and held along that line 0.2-0.6 m off (stop 42).
+direction, and held along that line up to 0.8 m off (stop 42).
 
 Conventions: velocities NED [m/s], headings [rad] from north, time in vehicle seconds.
 """
