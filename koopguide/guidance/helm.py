@@ -49,8 +49,6 @@ class Helm:
 
     def __init__(self, cfg: GuidanceConfig, law: GuidanceLaw) -> None:
         self.cfg, self.law = cfg, law
-        self.ability = TurnAbility()
-        self.lags = BoatLags(1.0 / STOP_GAIN, SPEED_LAG_S)  # how its way follows speed 0, ahead and astern
         self.planner = ManeuverPlanner(
             cfg.command.max_speed_mps, cfg.command.turn_speed_mps, math.radians(cfg.arrival.facing_deg)
         )
@@ -69,7 +67,6 @@ class Helm:
         self.current_std = 0.0  # the current estimate's spread [m/s]
         self.sheared = False  # the water has shown shear (latched: a property of the water, not of the boat)
         self.shearing = False  # ... and shows it now
-        self.turn_probe = TurnProbe(cfg.command, law.outside_area)  # how it turns and stops, asked at the start
         self.doing = "following the field"  # what the last command did (for the status's reason)
         self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
         self.sent_ned: np.ndarray | None = None  # the velocity last sent [m/s] (None: none went out)
@@ -78,12 +75,13 @@ class Helm:
         # separation filter expects; a boat that turns in place keeps its ahead-or-astern maneuver near a point
         self.in_company = False
         self.arrived = False  # the service has declared arrival (set by the supervisor each command)
+        self.reset()
 
     def reset(self) -> None:
-        """A restarted vehicle (maybe another boat): forget how it turns."""
+        """A restarted vehicle (maybe another boat): forget how it turns (and, at the start, set it up)."""
         self.ability = TurnAbility()
         self.lags = BoatLags(1.0 / STOP_GAIN, SPEED_LAG_S)  # how its way follows speed 0, ahead and astern
-        self.turn_probe = TurnProbe(self.cfg.command, self.law.outside_area)
+        self.turn_probe = TurnProbe(self.cfg.command, self.law.outside_area)  # how it turns and stops, asked first
         self.planner.reset()
         self.line.reset()
         self.asked_heading = None

@@ -105,8 +105,10 @@ class TurnProbe:
             a.needs_way, self.with_way, self.way_began = True, True, t  # it did not turn: it needs way
             self.until = t + self.cfg.probe_turn_s
             self.heading = wrap_pi(heading_rad + self._side(heading_rad, p_ned) * PROBE_WAY_RAD)
-        sideways = self._sideways(t, heading_rad, ground_ned) or self._with_course(t, heading_rad)
-        if self.stop_until is None and sideways:
+        # in the turn under way only (the stop after it runs on in whatever direction the turn left it)
+        if self.stop_until is None and (
+            self._sideways(t, heading_rad, ground_ned) or self._with_course(t, heading_rad)
+        ):
             a.moves_sideways, a.needs_way = True, False
             return None
         if t >= self.until:
