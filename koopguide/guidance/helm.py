@@ -38,6 +38,7 @@ from koopguide.guidance.turn_probe import Command, TurnProbe
 
 LINE_CURRENT_SIGMAS = 2.0  # a current estimate this many of its standard deviations strong sets the holding line
 LINE_DOING = "making for the line it can hold the goal on"  # near the goal, a boat that needs way, off its line
+DRIFT_DOING = "drifting onto the goal on the current's line"  # near it, a boat that turns in place (law/maneuver.py)
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
 LINE_LEAVE = 1.25  # ... and goes back to following the field only beyond this many times that distance
 SHEARED_WEIGHT = 0.5  # the current estimator's shear weight beyond which the water is sheared (estimation/current.py)
@@ -216,6 +217,7 @@ class Helm:
             slow_to_turn=self.cfg.command.turn_slowdown,
             holding=holding,
         )
+        self.doing = DRIFT_DOING if self.planner.drifting and not holding else self.doing
         return self._maneuver(m)
 
     def follow(

@@ -23,6 +23,8 @@ from koopguide.guidance.law.creep_cycle import CREEP_M, CREEP_MPS
 from koopguide.guidance.law.line_approach import EDGE_LEG_M, LineApproach
 from koopguide.guidance.law.maneuver import (
     ASTERN_RAD,
+    DRIFT_ENTER,
+    DRIFT_LEAVE,
     HOLDING_ASTERN_RAD,
     MIN_SPEED_MPS,
     Maneuver,
@@ -140,6 +142,57 @@ def test_keeping_station_the_ferry_angle_sets_the_boat_across_the_current_the_wa
             made_good = rover_ground_velocity(m.heading_rad, m.speed_mps, c)
             assert made_good[0] * north > 0  # it is set the way it should go
             assert abs(made_good[1]) < 0.01  # ... and held against the current
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    heading=angles,
+    c_dir=angles,
+    c_speed=st.floats(1.01 * CURRENT_MIN_MPS, 0.1),
+    w_frac=st.floats(0.0, 0.999 * DRIFT_ENTER),
+    w_dir=angles,
+)
+def test_making_for_a_point_at_nearly_the_currents_velocity_a_boat_drifts_on_its_line_as_it_lies(
+    heading, c_dir, c_speed, w_frac, w_dir
+) -> None:
+    """A goal just downstream: the ground velocity wanted is nearly the current's, and the water velocity w that
+    remains turns with every tick. A boat that turns in place is not turned after it (bow downstream, the
+    simulator's boat pivoted after it 0.3 m short of the goal for 25 s): its hull goes onto the current's line at
+    the nearer end, as when it keeps station, and what it makes good is off the wanted ground velocity by less than
+    |w| (the part of w across the hull, which Rover does not correct)."""
+    ferry = math.radians(30.0)
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=ferry)
+    c = c_speed * unit(c_dir)
+    v = c + w_frac * c_speed * unit(w_dir)
+    m = planner.plan(v, heading, c, pivoting(), distance_m=0.3)
+    assert planner.drifting
+    upstream = c_dir + math.pi
+    off_line = abs(wrap_pi(m.heading_rad - upstream))
+    assert min(off_line, math.pi - off_line) <= ferry + 1e-9  # on the line, either end
+    to_upstream = abs(wrap_pi(upstream - heading))
+    if to_upstream > HOLDING_ASTERN_RAD + 1e-6:  # bow downstream already: it stays so, stern to the current
+        assert m.astern and abs(wrap_pi(m.heading_rad - heading)) <= math.pi - HOLDING_ASTERN_RAD + ferry + 1e-9
+    m = planner.plan(v, m.heading_rad, c, pivoting(), distance_m=0.3)  # once it lies so
+    if abs(float(v @ unit(m.heading_rad))) >= MIN_SPEED_MPS:
+        made_good = rover_ground_velocity(m.heading_rad, m.speed_mps, c)
+        assert float(np.hypot(*(made_good - v))) <= w_frac * c_speed + 1e-9
+
+
+def test_drifting_onto_a_point_has_hysteresis_and_is_for_boats_that_turn_in_place_near_a_point() -> None:
+    c = np.array([-0.03, 0.0])  # toward the south
+    across = unit(math.pi / 2)  # w across the current, east
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15)
+    between = 0.5 * (DRIFT_ENTER + DRIFT_LEAVE)
+    for frac, drifting in [(0.5 * DRIFT_ENTER, True), (between, True), (1.1 * DRIFT_LEAVE, False)]:
+        planner.plan(c + frac * 0.03 * across, math.pi, c, pivoting(), distance_m=0.3)
+        assert planner.drifting == drifting, frac
+    planner.plan(c + between * 0.03 * across, math.pi, c, pivoting(), distance_m=0.3)
+    assert not planner.drifting  # between the two: it does not begin to drift
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15)
+    m = planner.plan(c + 0.1 * 0.03 * across, math.pi, c, pivoting())  # following the field, no point: along w
+    assert not planner.drifting and abs(wrap_pi(m.heading_rad - math.atan2(across[1], across[0]))) < 1e-9
+    planner.plan(c + 0.1 * 0.03 * across, math.pi, c, rudder(), distance_m=0.3)  # a rudder boat has its line approach
+    assert not planner.drifting
 
 
 @settings(max_examples=200, deadline=None)

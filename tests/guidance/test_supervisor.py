@@ -279,6 +279,23 @@ def test_a_boat_that_starts_by_the_goal_arrives_only_once_the_probe_has_told_how
             assert all(d.state is S.GUIDING for d in decisions) and not bench.sup.arrived
 
 
+def test_a_boat_that_turns_in_place_drifting_onto_a_goal_downstream_lies_on_the_line_and_says_so(
+    zshape_model: Path,
+) -> None:
+    """0.3 m upstream of the goal in 0.03 m/s toward the south, bow downstream: the ground velocity wanted is nearly
+    the current's; the boat is not turned after the water velocity that remains (law/maneuver.py) but kept on the
+    current's line, stern to the current, and the status's reason says it drifts onto the goal."""
+    bench = Bench(zshape_model)
+    helm = bench.sup.helm
+    c = np.array([-0.03, 0.0])
+    p, heading = np.array([0.3, 0.0]), math.pi
+    v, yaw = helm.near(p, c + np.array([0.0, -0.004]), heading, c, 0.3)
+    assert helm.planner.drifting and helm.doing == "drifting onto the goal on the current's line"
+    asked = yaw if yaw is not None else math.atan2(v[1], v[0])
+    assert abs(math.remainder(asked - math.pi, 2 * math.pi)) <= math.radians(bench.cfg.arrival.facing_deg) + 1e-9
+    assert float(np.asarray(v) @ np.array([-1.0, 0.0])) > 0.0  # it goes on downstream, onto the goal
+
+
 def test_station_keeping_with_integral_action_holds_a_boat_unlike_the_model(zshape_model: Path) -> None:
     """A boat that makes good half of its setpoint through the water, in 0.05 m/s toward the east, with no
     current compensation: proportional feedback alone settles where kp e / 2 = |c|, 0.2 m off; the

@@ -28,6 +28,12 @@ boat turn toward wherever it should go, however far round that is:
   heading along w swings round the compass when the wanted ground velocity is near the current's own (w -> 0:
   the goal just downstream), and every turn sets a boat that turns at 7 deg/s off by the current: at the goal
   across the current, boats turned up to 160 deg, and the current set them 0.24-0.38 m off while they did.
+  So does a boat that turns in place making for a point (``distance_m``) whose wanted ground velocity is nearly the
+  current's (``|w| < DRIFT_ENTER |c|``, until ``DRIFT_LEAVE``): drifting onto a goal just downstream. There w is small
+  and turns with every tick (the approach cap, law/command.py, puts it at the edge of the sector the hull may face),
+  and a boat that came in bow downstream pivoted after it for 25 s (the simulator's) to 35 s (a hull of twice its
+  mass) 0.3 m short of the goal; on the line it drifts in as it lies, stern to the current, in a few seconds. The
+  ground velocity made good then differs from the one wanted by w's part across the hull, under ``DRIFT_LEAVE |c|``.
 
 Conventions: NED velocities ``(2,)`` [m/s], headings [rad] from north, turn rates [rad/s], distances [m].
 """
@@ -46,6 +52,7 @@ from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, CURRENT_MIN_MPS
 ASTERN_RAD = math.radians(120.0)  # switch ahead <-> astern when the current direction needs a larger turn
 HOLDING_ASTERN_RAD = math.radians(100.0)  # ... keeping station in a current: the nearer end of its line, past 90 deg
 TURNING_RAD = math.radians(15.0)  # a heading error this large is a turn (for the way floor)
+DRIFT_ENTER, DRIFT_LEAVE = 0.3, 0.5  # |w| / |c| below which a boat making for a point drifts on the current's line
 CIRCLE_MARGIN = 0.7  # fraction of the geometric speed cap used (the turn rate is an estimate)
 # the smallest speed sent while steering (exactly 0 would be Rover's stop controller), and the current estimate
 # below which there is no current: the law's own (law/command.py), one value each for both
@@ -93,16 +100,18 @@ class Maneuver:
 
 
 class ManeuverPlanner:
-    """Chooses ahead or astern with hysteresis (its only state) and shapes the speed for the boat's turning."""
+    """Chooses ahead or astern, and whether to drift onto a point on the current's line, each with hysteresis (its
+    only state), and shapes the speed for the boat's turning."""
 
     def __init__(self, max_speed_mps: float, way_mps: float, ferry_rad: float = math.radians(30.0)) -> None:
         self.max_speed = max_speed_mps
         self.way = min(way_mps, max_speed_mps)
         self.ferry = ferry_rad
         self.astern = False
+        self.drifting = False  # making for a point at nearly the current's own velocity: on its line
 
     def reset(self) -> None:
-        self.astern = False
+        self.astern = self.drifting = False
 
     def plan(
         self,
@@ -119,14 +128,17 @@ class ManeuverPlanner:
 
         ``distance_m`` (to the point it makes for, when near one) caps the speed of a boat that turns in place
         so that its turning circle reaches the point (``slow_to_turn`` False: no slowing at all); a boat that
-        needs way keeps ``way_mps`` while it turns. ``holding``: keeping station (in a current: on its line).
+        needs way keeps ``way_mps`` while it turns. ``holding``: keeping station (in a current: on its line); a boat
+        that turns in place making for a point at nearly the current's velocity drifts onto it on that line too.
         """
         v = np.asarray(v_ground, dtype=float)
         c = water_current(current_ned)
         w = v - c  # through the water
         c_norm = float(np.hypot(*c))
         ferry = None
-        if holding and c_norm > 0.0:  # on the current's line: which end from the line itself, then the ferry angle
+        near = distance_m is not None and not ability.needs_way and c_norm > 0.0
+        self.drifting = near and float(np.hypot(*w)) < (DRIFT_LEAVE if self.drifting else DRIFT_ENTER) * c_norm
+        if (holding or self.drifting) and c_norm > 0.0:  # on the current's line: its nearer end, then the ferry
             ahead, flip = math.atan2(-c[1], -c[0]), HOLDING_ASTERN_RAD  # upstream
             cross = float(v @ unit(ahead + 0.5 * math.pi))  # the wanted ground speed across the line
             # the crab angle of the water velocity w (exact), or the ferry glide's when going downstream
