@@ -134,17 +134,17 @@ class ManeuverPlanner:
         v = np.asarray(v_ground, dtype=float)
         c = water_current(current_ned)
         w = v - c  # through the water
-        c_norm = float(np.hypot(*c))
+        c_norm, w_norm = float(np.hypot(*c)), float(np.hypot(*w))
         ferry = None
-        near = distance_m is not None and not ability.needs_way and c_norm > 0.0
-        self.drifting = near and float(np.hypot(*w)) < (DRIFT_LEAVE if self.drifting else DRIFT_ENTER) * c_norm
+        near = distance_m is not None and not ability.needs_way  # (no current, c_norm 0: never drifting)
+        self.drifting = near and w_norm < (DRIFT_LEAVE if self.drifting else DRIFT_ENTER) * c_norm
         if (holding or self.drifting) and c_norm > 0.0:  # on the current's line: its nearer end, then the ferry
             ahead, flip = math.atan2(-c[1], -c[0]), HOLDING_ASTERN_RAD  # upstream
             cross = float(v @ unit(ahead + 0.5 * math.pi))  # the wanted ground speed across the line
             # the crab angle of the water velocity w (exact), or the ferry glide's when going downstream
             ferry = min(self.ferry, max(-self.ferry, math.atan2(cross, c_norm + max(float(v @ unit(ahead)), 0.0))))
             distance_m = None  # the hull keeps to the line: no turning circle to make the goal by
-        elif float(np.hypot(*w)) <= 1e-9:  # drifting with the current is wanted (or nothing at all): speed 0
+        elif w_norm <= 1e-9:  # drifting with the current is wanted (or nothing at all): speed 0
             return Maneuver(heading_rad, 0.0, self.astern)  # is Rover's stop controller, throttle off: it drifts
         else:
             ahead, flip = math.atan2(w[1], w[0]), ASTERN_RAD
