@@ -15,7 +15,9 @@ import pytest
 
 from koopguide.guidance import settings
 from koopguide.guidance.estimation.current import CurrentEstimator
+from koopguide.guidance.estimation.turning import TurnAbility
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceState, along_current, crab
+from koopguide.guidance.law.maneuver import ManeuverPlanner
 
 from .test_guidance_math import law_for
 
@@ -280,3 +282,26 @@ def test_the_hulls_own_slip_in_gentle_turns_is_learned_and_not_read_as_current(m
     unlearned, still_unlearned = worst(kappa_s, lag_s), worst(0.0, lag_s)
     assert learned <= 0.6 * unlearned, (learned, unlearned)
     assert still <= still_unlearned + 1.0, (still, still_unlearned)
+
+
+@pytest.mark.parametrize(("off_deg", "from_m"), [(0.0, 0.45), (8.0, 0.45), (16.0, 0.45), (20.0, 0.4)])
+def test_a_goal_just_off_straight_downstream_asked_at_the_approach_cap_is_drifted_onto(
+    zshape_model, off_deg: float, from_m: float
+) -> None:
+    """Asked at the approach cap's speed toward a goal ``off_deg`` off straight downstream, the water velocity left
+    over lies at the edge of the sector the hull may face, |w| = |c| sin(alpha) / sin(theta + alpha): a boat that
+    turns in place drifts onto the goal on the current's line (law/maneuver.py) all the way in from ``from_m``. At
+    stop 43's threshold (0.3 |c|) a goal 16 deg off drifted only from 0.35 m to 0.21 m, and a heavier skid-steer
+    boat coming down 16 deg off at 0.37-0.40 m (|w| 0.36-0.41 |c|) pivoted after w instead, 0.3 m short of the goal
+    for 30 s (Zshape start 4 toward S, one flight in seven on a loaded machine)."""
+    law = law_for(zshape_model)
+    arrival = law.arrival
+    c = np.array([-0.03, 0.0])  # toward the south
+    alpha = math.radians(off_deg)
+    direction = np.array([-math.cos(alpha), math.sin(alpha)])  # to the goal: off straight downstream
+    for distance in np.linspace(arrival.radius_m + 1e-3, from_m, 12):
+        cap = law.approach_cap(float(distance), direction, c)
+        v = direction * min(cap, law.command.max_speed_mps)
+        planner = ManeuverPlanner(law.command.max_speed_mps, 0.15, math.radians(arrival.facing_deg))
+        planner.plan(v, math.pi, c, TurnAbility(), distance_m=float(distance))  # bow downstream, a boat that pivots
+        assert planner.drifting, (off_deg, float(distance), float(np.hypot(*(v - c))) / 0.03)

@@ -52,7 +52,12 @@ from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, CURRENT_MIN_MPS
 ASTERN_RAD = math.radians(120.0)  # switch ahead <-> astern when the current direction needs a larger turn
 HOLDING_ASTERN_RAD = math.radians(100.0)  # ... keeping station in a current: the nearer end of its line, past 90 deg
 TURNING_RAD = math.radians(15.0)  # a heading error this large is a turn (for the way floor)
-DRIFT_ENTER, DRIFT_LEAVE = 0.3, 0.5  # |w| / |c| below which a boat making for a point drifts on the current's line
+# |w| / |c| below which a boat making for a point drifts on the current's line (and above which it stops). At the edge
+# of the approach cap's sector (law/command.py), |w| = |c| sin(alpha) / sin(theta + alpha) for a goal alpha off
+# straight downstream: 0.5 takes goals up to about 25 deg off it, the cross-current part the default 30 deg ferry
+# makes; at 0.3 (stop 43) a goal 16 deg off sat on the threshold (|w| 0.36-0.41 |c|), and a heavier boat that
+# did not enter pivoted 0.3 m short of it for 30 s in one flight in seven under load (arrived after 71.4 s)
+DRIFT_ENTER, DRIFT_LEAVE = 0.5, 0.7
 CIRCLE_MARGIN = 0.7  # fraction of the geometric speed cap used (the turn rate is an estimate)
 # the smallest speed sent while steering (exactly 0 would be Rover's stop controller), and the current estimate
 # below which there is no current: the law's own (law/command.py), one value each for both
