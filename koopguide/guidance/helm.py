@@ -136,7 +136,7 @@ class Helm:
         if at_edge or self.ability.moves_sideways:  # a boat that goes where it is sent turns as it will
             return
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
-        self.ability.update(t, asked, u, turn_rate_radps)
+        self.ability.update(t, asked, u, turn_rate_radps, way_known=current_ned is not None)
 
     def at_edge(self, p_ned: np.ndarray) -> bool:
         """Whether ``p_ned`` [m] lies within ``EDGE_INSET_M`` of the area's edge, or beyond it. A boat set onto a
@@ -231,6 +231,7 @@ class Helm:
         """Following the field: the law's setpoint ``sp``, or heading and speed for a boat that needs way."""
         if self.ability.needs_way and heading_rad is not None and sp.ground_ned is not None and not self.in_company:
             if distance_m <= self.line_radius_m():
+                self.doing = LINE_DOING  # within two turning radii: a planned approach onto the line, not the field
                 return self._on_line(p_ned, heading_rad, current_ned)
             self.line.reset()
             m = self.planner.plan(

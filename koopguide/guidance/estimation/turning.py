@@ -10,7 +10,10 @@ asked to turn, i.e. while the heading it was sent differs from its heading by mo
   rudder boat turns): a vehicle whose velocity follows the setpoint while its heading does not, or is merely the
   direction it moves in; its heading then tells nothing about how it moves;
 * turns in place: it turned faster than ``PIVOT_RATE`` while slower than ``STILL_MPS`` through the water, for
-  ``PIVOT_S`` in a row (not the moment a boat reversing from ahead to astern passes through zero speed);
+  ``PIVOT_S`` in a row (not the moment a boat reversing from ahead to astern passes through zero speed), where its
+  way through the water is known: with no current estimate yet, the speed is the ground's along the heading, and a
+  rudder boat stemming an unknown current at its own speed through the water, turning, looks just like a pivot (a
+  property test found one: 0.0625 m/s through the water against 0.0625 m/s, turning at 3 deg/s, stop 44);
 * needs way: it stayed below ``STUCK_RATE`` while slower than ``SLOW_MPS`` for ``STUCK_S`` in a row
   (a rudder boat asked to turn at a crawl). Until either is seen, the boat is taken to turn in place (the
   Rover skid-steer default); evidence of the other kind replaces it;
@@ -61,9 +64,17 @@ class TurnAbility:
         self._asked_since: float | None = None  # vehicle time the hard turn under way was first asked [s]
         self._t: float | None = None
 
-    def update(self, t: float, asked_error_rad: float | None, speed_water_mps: float, turn_rate_radps: float) -> None:
+    def update(
+        self,
+        t: float,
+        asked_error_rad: float | None,
+        speed_water_mps: float,
+        turn_rate_radps: float,
+        way_known: bool = True,
+    ) -> None:
         """One sample at vehicle time ``t``: the heading error the boat was sent (None: no heading asked),
-        its speed through the water along its heading and its turn rate."""
+        its speed through the water along its heading and its turn rate. ``way_known``: that speed is through the
+        water (False: over ground, no current known; no turn in place is read from it)."""
         if not (math.isfinite(speed_water_mps) and math.isfinite(turn_rate_radps)):
             return
         dt = 0.0 if self._t is None or t <= self._t else t - self._t
@@ -76,7 +87,7 @@ class TurnAbility:
         self._asked_since = t if self._asked_since is None else self._asked_since
         u, r = abs(speed_water_mps), abs(turn_rate_radps)
         self.turn_rate = max(self.turn_rate, r)
-        pivoting = u < STILL_MPS and r >= PIVOT_RATE
+        pivoting = way_known and u < STILL_MPS and r >= PIVOT_RATE
         stuck = u < SLOW_MPS and r < STUCK_RATE
         self._pivot_since = (t if self._pivot_since is None else self._pivot_since) if pivoting else None
         self._stuck_since = (t if self._stuck_since is None else self._stuck_since) if stuck else None
