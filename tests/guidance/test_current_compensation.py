@@ -293,15 +293,15 @@ def test_a_goal_just_off_straight_downstream_asked_at_the_approach_cap_is_drifte
     turns in place drifts onto the goal on the current's line (law/maneuver.py) all the way in from ``from_m``. At
     stop 43's threshold (0.3 |c|) a goal 16 deg off drifted only from 0.35 m to 0.21 m, and a heavier skid-steer
     boat coming down 16 deg off at 0.37-0.40 m (|w| 0.36-0.41 |c|) pivoted after w instead, 0.3 m short of the goal
-    for 30 s (Zshape start 4 toward S, one flight in seven on a loaded machine)."""
+    for 30 s (Zshape start 4 toward S, 3 of 23 flights on a loaded machine)."""
     law = law_for(zshape_model)
-    arrival = law.arrival
+    arrival, command = law.arrival, law.command
     c = np.array([-0.03, 0.0])  # toward the south
     alpha = math.radians(off_deg)
     direction = np.array([-math.cos(alpha), math.sin(alpha)])  # to the goal: off straight downstream
     for distance in np.linspace(arrival.radius_m + 1e-3, from_m, 12):
         cap = law.approach_cap(float(distance), direction, c)
-        v = direction * min(cap, law.command.max_speed_mps)
-        planner = ManeuverPlanner(law.command.max_speed_mps, 0.15, math.radians(arrival.facing_deg))
+        v = direction * min(cap, command.max_speed_mps)
+        planner = ManeuverPlanner(command.max_speed_mps, command.turn_speed_mps, math.radians(arrival.facing_deg))
         planner.plan(v, math.pi, c, TurnAbility(), distance_m=float(distance))  # bow downstream, a boat that pivots
         assert planner.drifting, (off_deg, float(distance), float(np.hypot(*(v - c))) / 0.03)

@@ -54,9 +54,10 @@ HOLDING_ASTERN_RAD = math.radians(100.0)  # ... keeping station in a current: th
 TURNING_RAD = math.radians(15.0)  # a heading error this large is a turn (for the way floor)
 # |w| / |c| below which a boat making for a point drifts on the current's line (and above which it stops). At the edge
 # of the approach cap's sector (law/command.py), |w| = |c| sin(alpha) / sin(theta + alpha) for a goal alpha off
-# straight downstream: 0.5 takes goals up to about 25 deg off it, the cross-current part the default 30 deg ferry
-# makes; at 0.3 (stop 43) a goal 16 deg off sat on the threshold (|w| 0.36-0.41 |c|), and a heavier boat that
-# did not enter pivoted 0.3 m short of it for 30 s in one flight in seven under load (arrived after 71.4 s)
+# straight downstream: 0.5 drifts onto a goal 16 deg off from 0.45 m in and one 20 deg off from 0.4 m in (theta
+# narrows as the boat closes; tests/guidance/test_current_compensation.py); at 0.3 (stop 43) a goal 16 deg off drifted
+# only from 0.35 to 0.21 m, and a heavier boat at 0.37-0.40 m (|w| 0.36-0.41 |c|) pivoted 0.3 m short of it for 30 s
+# instead, in 3 of 23 flights beside two busy processes (arrived after 71.4 s)
 DRIFT_ENTER, DRIFT_LEAVE = 0.5, 0.7
 CIRCLE_MARGIN = 0.7  # fraction of the geometric speed cap used (the turn rate is an estimate)
 # the smallest speed sent while steering (exactly 0 would be Rover's stop controller), and the current estimate
