@@ -249,10 +249,11 @@ class Supervisor:
         distance = law.distance_to_goal(p)
         if self.arrived:
             self.reacquire_if_drifted(distance, now)
-        elif distance <= arrival.radius_m and self.helm.on_station(heading):
+        elif distance <= arrival.radius_m and self.helm.on_station(heading, distance):
             self.arrived, self.degraded, self.back_reason = True, False, ""
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
-            self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s")
+            how = self.helm.arrival_how()
+            self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s{how}")
         self.helm.arrived = self.arrived
         error = law.goal_ned - p
         # drifted off, within the capture radius: station keeping (reported as guiding), not the approach's speed floor

@@ -382,7 +382,7 @@ def test_in_sheared_water_the_holding_line_is_the_still_water_one_for_the_rest_o
     it makes for the current's line (through the goal, north-south); once the estimator has seen shear (its
     innovations beyond uniform water's), for the line from the boat to the goal, and it keeps that line when the
     shear is no longer seen. The capture search's model boat drifts on the estimate at the boat, except while the
-    estimator sees shear there (stop 32)."""
+    estimator sees shear there (stop 32); its capture search makes for the goal alone (stop 45)."""
     from koopguide.guidance.helm import SHEARED_WEIGHT, Helm
 
     cfg = guidance_settings.load()
@@ -403,6 +403,7 @@ def test_in_sheared_water_the_holding_line_is_the_still_water_one_for_the_rest_o
     sheared = rudder_near_goal(1.0)
     assert not sheared.line.in_current and sheared.line.axis_rad == pytest.approx(to_goal)
     assert sheared.line.drift is None  # shear seen here and now: the estimate at the boat is no guide either
+    assert sheared.line.capture.point_only and not uniform.line.capture.point_only  # no line to capture (stop 45)
     for k in range(1, 20):  # the shear is no longer seen: the water is still the sheared water
         sheared.observe(0.1 * k, heading, 0.0, np.zeros(2), current, 0.005, 0.0)
         sheared.near(p, -p, heading, current, float(np.hypot(*p)))

@@ -8,6 +8,7 @@ facing along it, or across it.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -40,11 +41,14 @@ def fly(
     until=None,
     axis: float | None = None,
     told: np.ndarray | None = None,
+    point_only: bool = False,
 ) -> tuple[list[tuple[float, np.ndarray, float]], float]:
     """Drive the ideal boat by the search alone from ``start`` (the goal at the origin, the line along the current,
     or north in still water, unless ``axis`` is given) for ``limit_s`` or until ``until(t, p, psi)``: its track
-    (t, p, psi) and the largest speed asked. ``told``: the current the search is told (default: the one there)."""
+    (t, p, psi) and the largest speed asked. ``told``: the current the search is told (default: the one there);
+    ``point_only``: the search's (sheared water: no line)."""
     search = CaptureSearch(max_speed_mps=0.3)
+    search.point_only = point_only
     still = float(np.hypot(*current)) == 0.0
     axis = (0.0 if still else math.atan2(-current[1], -current[0])) if axis is None else axis
     told = (None if still else current) if told is None else told
@@ -286,3 +290,42 @@ def test_the_capture_search_drifts_on_what_it_is_told_and_on_nothing_when_told_n
     drift = np.array([0.0, 0.03])
     line.aim(np.zeros(2), np.zeros(2), 0.0, None, drift)
     assert line.drift is drift and not line.in_current
+
+
+def first_at_rest_within(
+    track: list[tuple[float, np.ndarray, float]], current: np.ndarray, stop_s: float
+) -> float | None:
+    """The first time [s] the ideal boat lies within the arrival radius with room left for its way through the water
+    to run on over ``stop_s`` (Helm.stops_within); None: never."""
+    for (t0, p0, _), (t1, p1, psi1) in itertools.pairwise(track):
+        h = unit(psi1)
+        water = float((p1 - p0) @ h / (t1 - t0) - current @ h)  # ground = way along the heading + current
+        if float(np.hypot(*p1)) + abs(water) * stop_s <= ARRIVAL_M:
+            return t1
+    return None
+
+
+@pytest.mark.parametrize("toward_deg", [0.0, 90.0, 180.0, 270.0])
+def test_with_no_line_to_capture_the_search_brings_the_boat_to_rest_at_the_goal_whatever_its_heading(
+    toward_deg: float,
+) -> None:
+    """Sheared water (``point_only``): no line to capture, and the boat arrives off its line once its way would stop
+    it within the arrival radius (Helm.stops_within). From 0.35 m up- or downstream of the goal, bow toward it or
+    away from it 20 deg either side, the search gets it there within 10 s, and sooner in all than lining it up on
+    the current's line through the goal. (From across the current the search is myopic: a boat the current sets
+    past the goal drifts out of its zone, and the planner brings it back from beyond CAPTURE_LEAVE_M.)"""
+    current = 0.03 * unit(math.radians(toward_deg))
+    axis = math.atan2(-current[1], -current[0])
+    times, lined_up = [], []
+    for bearing_deg in (0.0, 180.0):  # downstream, upstream
+        for bow_deg in (160.0, 200.0, -20.0, 20.0):  # toward the goal, away from it
+            start = 0.35 * unit(math.radians(toward_deg + bearing_deg))
+            heading = math.radians(toward_deg + bearing_deg + bow_deg)
+            track, fastest = fly(start, heading, current, 1.3, limit_s=20.0, point_only=True)
+            times.append(first_at_rest_within(track, current, stop_s=1.0))
+            assert times[-1] is not None and fastest <= 0.3 + 1e-9, (bearing_deg, bow_deg, times)
+            line_track, _ = fly(start, heading, current, 1.3, until=lambda t, p, psi: holds(p, psi, axis))
+            t, p, psi = line_track[-1]
+            lined_up.append(t if holds(p, psi, axis) else 60.0)
+    assert max(times) < 10.0, times
+    assert sum(times) < sum(lined_up), (times, lined_up)

@@ -241,6 +241,31 @@ def test_a_boat_that_needs_way_arrives_only_once_it_holds_its_line(zshape_model:
     assert bench.fly(DT, obey=False, current=(0.0, 0.03))[-1].state is S.ARRIVED
 
 
+def test_in_sheared_water_a_boat_that_needs_way_arrives_off_its_line_once_its_way_would_stop_it_within_the_radius(
+    zshape_model: Path,
+) -> None:
+    """In sheared water a rudder boat's line is the still-water one, and the current at the goal turns it off that
+    line (13 of 14 misses in 252 sheared campaign runs had passed within the arrival radius): there it arrives off
+    its line once its way through the water, run on over its stopping time, would leave it within the radius; the
+    log says how. Crossing the goal at way it does not (nor off its line in water not seen to be sheared: above)."""
+    bench = rudder_across_its_line(zshape_model)
+    helm = bench.sup.helm
+    helm.sheared = True  # the estimator has seen shear (latched: a property of the water)
+    tau = helm.lags.stopping.lag_s
+    way = 0.1  # through the water, northward along its heading [m/s]: it would run on way x tau past where it is
+    assert way * tau > bench.cfg.arrival.radius_m
+    bench.p = np.array([-0.3, 0.0])
+    helm.line.axis_rad = math.pi / 2  # its still-water line, chosen earlier: east-west, across its way north
+    for d in bench.fly(3.0, obey=False, current=(way, 0.03)):  # onto the goal at way, off its line
+        assert d.state is S.GUIDING and not helm.line.holding
+    assert not bench.sup.arrived and np.hypot(*bench.p) < 0.1  # at the goal, 1.5 s within the radius
+    bench.sup.take_notes()
+    decisions = bench.fly(1.5, obey=False, current=(0.0, 0.03))  # its way gone: it drifts on the current only
+    assert decisions[-1].state is S.ARRIVED and not helm.line.holding
+    arrivals = [n.text for n in bench.sup.take_notes() if n.text.startswith("arrived")]
+    assert len(arrivals) == 1 and "sheared water, off its line" in arrivals[0], arrivals
+
+
 def test_a_boat_that_needs_way_does_not_arrive_on_a_tick_without_its_heading(zshape_model: Path) -> None:
     """Within the arrival radius, across its line: a rudder boat whose attitude goes stale for a moment has not
     arrived on those ticks either (nothing says it holds its line; traced, such arrivals came crossing the goal at

@@ -21,6 +21,11 @@ whole ``STEP_S`` (the boat needs that long to get way on; a search every tick di
 search is made again from where the boat is. A boat already out of the area (pressed onto a tank's wall by the
 current) scores every sequence by how far out it ends up, so it comes back in first.
 
+In sheared water (``point_only``, set by the helm) there is no line to capture: the still-water line the boat makes
+for there is not the current's at the goal, which turns it off that line, and such a boat arrives off its line once
+its way would stop it within the arrival radius (Helm.stops_within). There the search scores a pose by its distance
+from the goal and the way left on, as that arrival does, and once arrived keeps it so.
+
 Rover's command for a manoeuvre: heading ``TURN_RAD`` off the heading it began with (the rudder stays hard over
 for its whole length: the boat turns by at most speed x ``STEP_S`` / R, far less) or that heading itself, at
 the speed over ground along the heading that gives ``speed`` through the water (Rover holds the speed over
@@ -93,6 +98,7 @@ class CaptureSearch:
         # the slower of each and SPEED_LAG_S, the lag the search was made with (what else delays the way, such as
         # the autopilot's speed loop, is not in the fit)
         self.lags_s = (SPEED_LAG_S, SPEED_LAG_S)
+        self.point_only = False  # no line to capture (sheared water): at rest at the goal, whatever the heading
         seqs = np.array(list(itertools.product(range(len(MANEUVERS)), repeat=HORIZON)))  # (S, HORIZON)
         table = np.array(MANEUVERS, dtype=float)
         self._direction = table[seqs, 0]  # (S, HORIZON)
@@ -181,8 +187,14 @@ class CaptureSearch:
             return pos, psi, u
 
         def pose_cost(pos, psi, u, k):  # how far from holding, a pose reached after k + 1 manoeuvres
-            off_axis = np.abs(wrap_pi(psi - axis_rad))
             way = ground(psi, u)
+            if self.point_only:  # at rest within the arrival radius, whatever the heading
+                return (
+                    (np.hypot(pos[:, 0], pos[:, 1]) / ALONG_SCALE_M) ** 2
+                    + (np.hypot(way[:, 0], way[:, 1]) / WAY_SCALE_MPS) ** 2
+                    + LATER_COST * k
+                )
+            off_axis = np.abs(wrap_pi(psi - axis_rad))
             downstream = (
                 np.zeros(n_seq, dtype=bool) if upstream is None else np.abs(wrap_pi(psi - upstream)) > math.pi / 2
             )
