@@ -9,7 +9,7 @@ told to stop, are learned from its telemetry (estimation/turning.py, estimation/
 probe (turn_probe.py); a boat seen to go where it is sent whatever its heading is sent velocities. In water the current
 estimator has seen to be sheared (``SHEARED_WEIGHT``) a boat that needs way holds the still-water line near the
 goal: the current at the boat is no guide to the goal's there. It arrives there off that line too, once its way would
-stop it within the arrival radius, and until then the capture search makes for that (law/capture.py). See
+stop it within the arrival radius, and its capture search makes for that and keeps it so (law/capture.py). See
 docs/guidance.md "Any boat".
 
 Conventions: NED velocities ``(2,)`` [m/s], headings [rad] from north, turn rates [rad/s], vehicle seconds.
