@@ -44,6 +44,8 @@ DRIFT_DOING = "drifting onto the goal on the current's line"  # near it, a boat 
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
 LINE_LEAVE = 1.25  # ... and goes back to following the field only beyond this many times that distance
 SHEARED_WEIGHT = 0.5  # the current estimator's shear weight beyond which the water is sheared (estimation/current.py)
+# how the boat came on station, for the arrival's log line (:meth:`Helm.on_station`; "": the usual way)
+OFF_LINE_HOW = " (sheared water, off its line: its way would stop it within the arrival radius)"
 EDGE_INSET_M = 0.05  # a boat this close to the area's edge (a tank's wall, a bank) slips by it, not the current [m]
 
 
@@ -78,6 +80,7 @@ class Helm:
         # separation filter expects; a boat that turns in place keeps its ahead-or-astern maneuver near a point
         self.in_company = False
         self.arrived = False  # the service has declared arrival (set by the supervisor each command)
+        self.station_how = ""  # how the last on_station found the boat on station ("": the usual way)
         self.reset()
 
     def reset(self) -> None:
@@ -165,6 +168,7 @@ class Helm:
         current's line, either end: one across it is carried off while it turns (7 deg/s: 0.2-0.4 m in 0.03 m/s). A
         current within one spread of nothing gives no line (a hull that slips more spreads the estimate: 0.015 m/s
         about a 0.03 m/s current, where the rudder boat's two spreads left a skid-steer one arriving across it)."""
+        self.station_how = ""
         if self.in_company:
             return True
         a = self.ability
@@ -173,7 +177,11 @@ class Helm:
         if not (a.pivot_seen or a.needs_way or self.cfg.command.probe_turn_s <= 0.0):
             return False
         if a.needs_way:
-            return self.line.holding or (self.sheared and distance_m is not None and self.stops_within(distance_m))
+            if self.line.holding:
+                return True
+            if self.sheared and distance_m is not None and self.stops_within(distance_m):
+                self.station_how = OFF_LINE_HOW
+            return bool(self.station_how)
         c = self._line_current(self._current(self.current_ned), 1.0)  # clear of its spread: a line to hold to
         return self.sheared or along_current(heading_rad, c, self.cfg.arrival.facing_deg)
 
@@ -185,12 +193,6 @@ class Helm:
         50-52), lining its bow up on a still-water line the current turned it off for a minute and more."""
         run_on = abs(self.water_mps) * self.lags.stopping.lag_s
         return distance_m + run_on <= self.cfg.arrival.radius_m
-
-    def arrival_how(self) -> str:
-        """How the boat came to be on station, for the arrival's log line ("": the usual way)."""
-        if self.ability.needs_way and self.sheared and not self.in_company and not self.line.holding:
-            return " (sheared water, off its line: its way would stop it within the arrival radius)"
-        return ""
 
     def line_radius_m(self) -> float:
         """Within this distance of the goal a boat that needs way makes for the line it will hold (twice its

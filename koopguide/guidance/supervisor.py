@@ -252,7 +252,7 @@ class Supervisor:
         elif distance <= arrival.radius_m and self.helm.on_station(heading, distance):
             self.arrived, self.degraded, self.back_reason = True, False, ""
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
-            how = self.helm.arrival_how()
+            how = self.helm.station_how
             self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s{how}")
         self.helm.arrived = self.arrived
         error = law.goal_ned - p

@@ -188,25 +188,21 @@ class CaptureSearch:
 
         def pose_cost(pos, psi, u, k):  # how far from holding, a pose reached after k + 1 manoeuvres
             way = ground(psi, u)
+            cost = (np.hypot(way[:, 0], way[:, 1]) / WAY_SCALE_MPS) ** 2 + LATER_COST * k  # at rest, soon
             if self.point_only:  # at rest within the arrival radius, whatever the heading
-                return (
-                    (np.hypot(pos[:, 0], pos[:, 1]) / ALONG_SCALE_M) ** 2
-                    + (np.hypot(way[:, 0], way[:, 1]) / WAY_SCALE_MPS) ** 2
-                    + LATER_COST * k
-                )
+                return cost + (np.hypot(pos[:, 0], pos[:, 1]) / ALONG_SCALE_M) ** 2
             off_axis = np.abs(wrap_pi(psi - axis_rad))
             downstream = (
                 np.zeros(n_seq, dtype=bool) if upstream is None else np.abs(wrap_pi(psi - upstream)) > math.pi / 2
             )
             heading_scale = np.where(downstream, ENTRY_ASTERN_RAD, HEADING_SCALE_RAD)  # the hold's entry, either end
-            cost = (
-                (pos @ normal / CROSS_SCALE_M) ** 2
+            return (
+                cost
+                + (pos @ normal / CROSS_SCALE_M) ** 2
                 + (pos @ a / ALONG_SCALE_M) ** 2
                 + (np.minimum(off_axis, math.pi - off_axis) / heading_scale) ** 2  # either end of the line
-                + (np.hypot(way[:, 0], way[:, 1]) / WAY_SCALE_MPS) ** 2
-                + LATER_COST * k
+                + ASTERN_END_COST * downstream
             )
-            return cost + ASTERN_END_COST * downstream
 
         for k in range(HORIZON):
             pos, psi, u = drive(pos, psi, u, self._direction[:, k] * speed, self._rudder[:, k], STEP_S)
