@@ -28,6 +28,7 @@ TURN_CREEP_M = 0.1  # how far a boat may creep along its heading while it turns 
 ESTIMATE_M = 0.02  # both boats' position errors: own estimate and the neighbour's moved-on status (<= 0.015) [m]
 CREEP_SEEN_MPS = 0.003  # a neighbour moving faster than this may creep on along its course while it turns [m/s]
 TURN_SPEED_MPS = 0.02  # while turning toward the filtered direction, the speed floor (keeps the direction) [m/s]
+DRIFT_SEEN_MPS = 0.01  # drift across the heading faster than this is the water's, not the estimate's noise [m/s]
 HEADING_SPEED_MPS = 0.001  # the least setpoint speed: it carries the direction to turn to (zero would turn north) [m/s]
 
 
@@ -120,7 +121,10 @@ class Neighbours:
         ``v``, then once more toward the filtered velocity); then, with the heading known, (1) while the bow
         points more than 90 deg off the filtered velocity, slow down to turn first, and (2) cap the speed so that
         the conditions hold for the velocity the boat has *until* it has turned, along its heading plus its
-        measured drift (separation.heading_speed_cap).
+        measured drift (separation.heading_speed_cap); or, (3) where that drift alone closes on a neighbour, send the
+        boat along its heading whichever way keeps the gap (separation.heading_escape_speed; astern as velocity + yaw
+        at its heading): a skid-steer boat held across a 0.03 m/s current drifted 0.3 m onto a boat held beside it,
+        its setpoint 0.001 m/s, to 0.15 m apart (two-boat encounter, both in direct pursuit; stop 46).
         The helm's ``yaw_rad`` pointing away from ``v`` means astern: the boat drives along its stern, and the
         filter reasons about that way (the heading turned by pi). A velocity the filter changes goes velocity-only
         (the boat turns to it, as the filter expects) unless the boat can go on astern along it."""
@@ -156,21 +160,30 @@ class Neighbours:
         filtered, active = out.velocity_ned, out.active
         self.detour_sides = out.detours
         speed = float(np.hypot(*filtered))
-        if heading_rad is not None and speed > 1e-12:
+        escape = None
+        if heading_rad is not None:
             bow = np.array([np.cos(heading_rad), np.sin(heading_rad)])
-            if active and speed > TURN_SPEED_MPS:  # turn first: cos(heading error), floored
-                filtered = filtered * max(float(filtered @ bow) / speed, TURN_SPEED_MPS / speed)
-                speed = float(np.hypot(*filtered))
             a, b = separation.barrier_rows(p, others, distance, fleet.barrier_gain_per_s, hold)
             drift = own_v - float(own_v @ bow) * bow  # across the heading [m/s]
-            cap = max(separation.heading_speed_cap(a, b, bow, drift), HEADING_SPEED_MPS)
-            if speed > cap:
-                filtered, active = filtered * (cap / speed), True
+            if float(np.hypot(*drift)) > DRIFT_SEEN_MPS:  # (noise read as drift walked a boat off its slot)
+                escape = separation.heading_escape_speed(a, b, bow, drift, self.max_speed_mps)
+            if escape is not None:  # drifting toward a neighbour: along the heading, whichever way keeps the gap
+                filtered, active = escape * bow, True
+            elif speed > 1e-12:
+                if active and speed > TURN_SPEED_MPS:  # turn first: cos(heading error), floored
+                    filtered = filtered * max(float(filtered @ bow) / speed, TURN_SPEED_MPS / speed)
+                    speed = float(np.hypot(*filtered))
+                cap = max(separation.heading_speed_cap(a, b, bow, drift), HEADING_SPEED_MPS)
+                if speed > cap:
+                    filtered, active = filtered * (cap / speed), True
         if not active:
             return Filtered(v, False, "", out.closest_m, yaw_rad)
         who = f", yielding to {', '.join(out.yielding_to)}" if out.yielding_to else ""
         note = f"separation active: nearest boat {out.closest_m:.2f} m (min {fleet.min_separation_m:g}){who}"
         f = (float(filtered[0]), float(filtered[1]))
+        if escape is not None:  # the bow held: astern (velocity + yaw) where the escape runs against it
+            bow_rad = heading_rad - math.pi if astern else heading_rad
+            return Filtered(f, True, note, out.closest_m, bow_rad if _astern(f, bow_rad) else None)
         return Filtered(f, True, note, out.closest_m, yaw_rad if astern and _astern(f, yaw_rad) else None)
 
 

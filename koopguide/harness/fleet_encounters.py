@@ -84,9 +84,17 @@ def course_heading_deg(field_: Any, start_model: np.ndarray, course_deg: float) 
     return (course_deg + math.degrees(math.atan2(way[1], way[0]))) % 360.0
 
 
-def setup(encounter: Encounter, model: Path, vehicle: str, current_mps: float, speedup: float = SPEEDUP) -> tuple:
-    """(configs, simulator config) of ``encounter`` with ``vehicle`` boats in a current toward the north."""
-    from koopguide.base import data
+def setup(
+    encounter: Encounter,
+    model: Path,
+    vehicle: str,
+    current_mps: float,
+    speedup: float = SPEEDUP,
+    guidance: dict[str, Any] | None = None,
+) -> tuple:
+    """(configs, simulator config) of ``encounter`` with ``vehicle`` boats in a current toward the north;
+    ``guidance``: overrides of both boats' guidance config (as the file's keys)."""
+    from koopguide.base import config, data
     from koopguide.guidance import settings
     from koopguide.model.field import load_field
 
@@ -98,7 +106,7 @@ def setup(encounter: Encounter, model: Path, vehicle: str, current_mps: float, s
     slots = np.array([[0.0, half if east else -half] for east in encounter.slot_east])
     flow = {"kinds": ["uniform"], "uniform": {"speed_mps": current_mps, "direction_deg": 0.0, "drift_std_mps": 0.0}}
     sim_extra = {"vehicle": vehicle, "flow": flow if current_mps > 0 else {"kinds": ["none"]}}
-    per_boat = [{"command": {"max_speed_mps": s}} for s in encounter.speeds_mps]
+    per_boat = [config.merge({"command": {"max_speed_mps": s}}, guidance or {}) for s in encounter.speeds_mps]
     cfgs, sim_cfg, _ = fleet_demo.fleet_setup(
         model, starts, speedup, headings, sim_extra=sim_extra, per_boat=per_boat, slots_ned=slots
     )
@@ -115,17 +123,19 @@ def fly(
     settle_s: float = 8.0,
     speedup: float = SPEEDUP,
     attempts: int = 3,
+    guidance: dict[str, Any] | None = None,
 ) -> EncounterResult:
     """Fly one encounter (one zenoh config for both services: peers on loopback; default a fresh port per
-    attempt). As the mission campaign's ``fly_paced``: a run that fell behind its pace by more than
-    ``mission.pace_limit_s`` (a busy machine: the services held for want of positions, or answered late) says
-    nothing about the separation, so it is flown again at half the speed-up; PaceError after ``attempts``."""
+    attempt; ``guidance``: as :func:`setup`). As the mission campaign's ``fly_paced``: a run that fell behind
+    its pace by more than ``mission.pace_limit_s`` (a busy machine: the services held for want of positions, or
+    answered late) says nothing about the separation, so it is flown again at half the speed-up; PaceError after
+    ``attempts``."""
     from koopguide.bus.zenoh_config import default_zenoh_config
     from koopguide.harness.mission import pace_limit_s, slower_until_paced
 
     async def at(x: float) -> tuple[fleet_demo.FleetResult, float, float, float]:
         """(the result, its wall time [s], its speed-up, its pace limit [simulated s])."""
-        cfgs, sim_cfg = setup(encounter, model, vehicle, current_mps, x)
+        cfgs, sim_cfg = setup(encounter, model, vehicle, current_mps, x, guidance)
         zc = default_zenoh_config(free_tcp_port()) if zenoh_config is None else zenoh_config
         start = time.monotonic()
         result = await fleet_demo.fly_fleet(cfgs, model, sim_cfg, timeout_s, [zc] * 2, settle_s=settle_s)

@@ -138,3 +138,63 @@ def test_a_boat_going_astern_is_judged_by_its_stern_and_keeps_its_yaw_only_while
     # the same velocity and heading going ahead (no yaw): the bow points away, so the filter only shapes it
     ahead = f.keep_separation(np.zeros(2), (0.0, -0.1), 0.0, 0.0, bow_east, np.array([0.0, -0.05]))
     assert ahead.yaw_rad is None
+
+
+def rover_hold_beside(helm_velocity, helm_yaw, heading_deg: float, duration_s: float = 60.0) -> float:
+    """Boat2 held at (-0.35, -0.3) by a boat parked at the origin (bow north, along the current), in a 0.03 m/s current
+    toward the north, asking ``helm_velocity`` [m/s] at ``helm_yaw`` [rad] (None: velocity only) each step. It moves
+    as Rover does: heading toward the setpoint's (or the yaw) at <= TURN_RATE, speed over ground along the heading
+    following the setpoint's signed speed, and the current's component across the heading carries it (Rover holds
+    speed over ground along the heading only). Returns the closest distance to the parked boat [m]."""
+    f = Neighbours("boat2", FLEET, 0.3)
+    c = np.array([0.03, 0.0])
+    p, psi, s = np.array([-0.35, -0.3]), math.radians(heading_deg), 0.0
+    vel = np.zeros(2)
+    closest, t = math.inf, 0.0
+    while t < duration_s:
+        f.hear(ev.NeighbourStatus(t, t - DT, "boat1", (0.0, 0.0), (0.0, 0.0), DT))
+        out = f.keep_separation(p, helm_velocity, t, t, psi, vel, helm_yaw)
+        v = np.array(out.velocity_ned)
+        if out.yaw_rad is not None:
+            want, speed = out.yaw_rad, float(v @ np.array([math.cos(out.yaw_rad), math.sin(out.yaw_rad)]))
+        else:
+            want, speed = math.atan2(v[1], v[0]), float(np.hypot(*v))
+        error = (want - psi + math.pi) % (2 * math.pi) - math.pi
+        psi += float(np.clip(2.0 * error, -TURN_RATE, TURN_RATE)) * DT
+        s += (speed - s) * DT / SPEED_LAG_S
+        bow = np.array([math.cos(psi), math.sin(psi)])
+        vel = s * bow + (c - float(c @ bow) * bow)  # along the heading as asked; across it, the current's
+        p = p + vel * DT
+        closest = min(closest, float(np.hypot(*p)))
+        t += DT
+    return closest
+
+
+@pytest.mark.parametrize("heading_deg", [-60.0, -90.0, -120.0, 60.0, 120.0])
+@pytest.mark.parametrize("astern", [True, False])
+def test_a_held_boat_drifting_across_its_bow_onto_a_neighbour_moves_along_its_heading_to_keep_the_gap(
+    heading_deg: float, astern: bool
+):
+    """Two boats held side by side in a current, one bow along it, the other across it: Rover cancels the current
+    only along each bow, so the second drifts at up to 0.03 m/s onto the first whatever speed >= 0 it is sent the
+    way it was going (seen in the simulator: 0.46 m to 0.15 m in 14 s, the setpoint 0.001 m/s). Sent along its
+    heading the other way, or on as needed, it keeps its distance, ahead or astern, with its bow held."""
+    bow = math.radians(heading_deg)
+    to_slot = np.array([0.05, 0.3])  # its slot lies beyond the parked boat: the helm asks toward it
+    yaw = math.atan2(-to_slot[1], -to_slot[0]) if astern else None  # astern: the bow the other way
+    closest = rover_hold_beside(tuple(0.001 * to_slot / np.hypot(*to_slot)), yaw, heading_deg)
+    assert closest >= D_MIN, (closest, heading_deg, astern)
+    # one step of the filter, as in the simulator's run: drifting in, the way it must go is along its heading
+    f = Neighbours("boat2", FLEET, 0.3)
+    f.hear(ev.NeighbourStatus(0.0, 0.0, "boat1", (0.0, 0.0), (0.0, 0.0), 0.0))
+    p, c = np.array([-0.2, -0.38]), np.array([0.03, 0.0])
+    h = np.array([math.cos(bow), math.sin(bow)])
+    drift = c - float(c @ h) * h
+    out = f.keep_separation(p, (0.0, 0.001), 0.0, 0.0, bow, drift, None)
+    closing = -float(p @ (np.array(out.velocity_ned) + drift)) / float(np.hypot(*p))  # toward boat1 [m/s]
+    gap = float(np.hypot(*p))
+    allowed = FLEET.barrier_gain_per_s * (gap**2 - D_MIN**2) / (2.0 * gap)  # the barrier at D_MIN (d is wider)
+    if float(-p @ drift) / gap > allowed:  # the drift carries it toward boat1 faster than the barrier allows
+        assert out.active and closing <= allowed + 1e-9, (out, closing)
+        along = np.array(out.velocity_ned) - float(np.array(out.velocity_ned) @ h) * h
+        assert np.hypot(*along) < 1e-9  # along its heading: no turn needed
