@@ -316,9 +316,11 @@ class Supervisor:
     def reacquire_if_drifted(self, distance: float, now: float) -> None:
         """Leave arrived for guiding if ``distance`` [m] plus the estimate's spread may exceed reacquire_radius_m."""
         limit = self.cfg.arrival.reacquire_radius_m
-        if not self.arrived or distance + HONEST_SIGMAS * self.vehicle.tracker.position_std_m() <= limit:
+        reach = distance + HONEST_SIGMAS * self.vehicle.tracker.position_std_m()  # as far as it may be [m]
+        if not self.arrived or reach <= limit:
             return
-        reason = f"drifted {distance:.2f} m from the goal, beyond reacquire_radius_m {limit:g}: guiding back"
+        spread = f" ({reach:.2f} m with the estimate's spread)" if distance <= limit else ""
+        reason = f"drifted {distance:.2f} m from the goal{spread}, beyond reacquire_radius_m {limit:g}: guiding back"
         self.back_reason = reason.replace(": guiding back", "; ")
         self._note(logging.WARNING, reason)
         self.arrived, self.reclaim, self.settled, self.degraded = False, self.settled, False, False
