@@ -152,22 +152,22 @@ class Helm:
         steps = EDGE_INSET_M * np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
         return float(np.max(self.law.outside_area(np.asarray(p_ned, dtype=float) + steps))) > 0.0
 
-    def on_station(self, heading_rad: float | None, distance_m: float | None = None) -> bool:
-        """Whether the boat can stay where it is, ``distance_m`` [m] from the goal (None: not known here). A boat
-        that needs way only once it holds its line (on it, facing along it: law/line_approach.py); crossing the
-        arrival radius at way, off the line, is not arriving. In sheared water, where its line is the still-water
-        one and the current at the goal turns under it, also once its way would stop it within the arrival radius
-        (:meth:`stops_within`): there no line is held, as a boat that turns in place holds none. Nor is
-        it before the turn probe has told whether the boat turns in place (a rudder boat that started by the goal
-        would otherwise be held as one that pivots: it shuttled ahead and astern 0.3-0.45 m off for a minute).
-        In company the distance alone decides; without a heading too, unless the boat is known to need way: then
-        a tick whose attitude is stale tells nothing about its line (such ticks are 1 in 2000, yet 72 of 2632
-        traced rudder arrivals came on one, crossing the goal at way with the bow up to 48 deg off the line:
-        half of those in uniform currents then held over 0.2 m p95). A boat that turns in place, in a current (not
-        sheared water: there the current at the boat turns as it goes), once its hull lies within ``facing_deg`` of the
-        current's line, either end: one across it is carried off while it turns (7 deg/s: 0.2-0.4 m in 0.03 m/s). A
-        current within one spread of nothing gives no line (a hull that slips more spreads the estimate: 0.015 m/s
-        about a 0.03 m/s current, where the rudder boat's two spreads left a skid-steer one arriving across it)."""
+    def on_station(self, heading_rad: float | None, offset_ned: np.ndarray | None = None) -> bool:
+        """Whether the boat can stay where it is, ``offset_ned`` [m] from the goal (boat - goal; None: not known here).
+        A boat that needs way only once it holds its line (on it, facing along it: law/line_approach.py); crossing the
+        arrival radius at way, off the line, is not arriving. In sheared water, where its line is the still-water one
+        and the current at the goal turns under it, also once its way would stop it within the arrival radius
+        (:meth:`stops_within`): there no line is held, as a boat that turns in place holds none. Nor is it before the
+        turn probe has told whether the boat turns in place (a rudder boat that started by the goal would otherwise be
+        held as one that pivots: it shuttled ahead and astern 0.3-0.45 m off for a minute). In company the distance
+        alone decides; without a heading too, unless the boat is known to need way: then a tick whose attitude is stale
+        tells nothing about its line (such ticks are 1 in 2000, yet 72 of 2632 traced rudder arrivals came on one,
+        crossing the goal at way with the bow up to 48 deg off the line: half of those in uniform currents then held
+        over 0.2 m p95). A boat that turns in place, in a current (not sheared water: there the current at the boat
+        turns as it goes), once its hull lies within ``facing_deg`` of the current's line, either end: one across it is
+        carried off while it turns (7 deg/s: 0.2-0.4 m in 0.03 m/s). A current within one spread of nothing gives no
+        line (a hull that slips more spreads the estimate: 0.015 m/s about a 0.03 m/s current, where the rudder boat's
+        two spreads left a skid-steer one arriving across it)."""
         self.station_how = ""
         if self.in_company:
             return True
@@ -179,20 +179,23 @@ class Helm:
         if a.needs_way:
             if self.line.holding:
                 return True
-            if self.sheared and distance_m is not None and self.stops_within(distance_m):
+            if self.sheared and offset_ned is not None and self.stops_within(offset_ned, heading_rad):
                 self.station_how = OFF_LINE_HOW
             return bool(self.station_how)
         c = self._line_current(self._current(self.current_ned), 1.0)  # clear of its spread: a line to hold to
         return self.sheared or along_current(heading_rad, c, self.cfg.arrival.facing_deg)
 
-    def stops_within(self, distance_m: float) -> bool:
-        """Whether the boat, ``distance_m`` [m] from the goal, would come to rest within the arrival radius: its
-        way through the water dies away over its stopping time (estimation/speed_lag.py), so it runs on about
-        ``|u| tau`` [m] (the current it drifts on is no part of that: no command stops it). A rudder boat in sheared
-        water passed within the radius of the goal in 13 of its 14 misses of 252 (vortex and double gyre, seeds
-        50-52), lining its bow up on a still-water line the current turned it off for a minute and more."""
-        run_on = abs(self.water_mps) * self.lags.stopping.lag_s
-        return distance_m + run_on <= self.cfg.arrival.radius_m
+    def stops_within(self, offset_ned: np.ndarray, heading_rad: float) -> bool:
+        """Whether the boat, ``offset_ned`` [m] from the goal (boat - goal) and heading ``heading_rad`` [rad], would
+        come to rest within the arrival radius: its way through the water dies away over its stopping time
+        (estimation/speed_lag.py), so it runs on ``u tau`` [m] along its heading (astern: back along it; the current it
+        drifts on is no part of that: no command stops it). A rudder boat in sheared water passed within the radius
+        of the goal in 13 of its 14 misses of 252 (vortex and double gyre, seeds 50-52), lining its bow up on a
+        still-water line the current turned it off for a minute and more. Taking the run-on as going anywhere
+        (``d + |u| tau``) left it missing those it ran on toward the goal (stop 46)."""
+        run_on = self.water_mps * self.lags.stopping.lag_s
+        rest = np.asarray(offset_ned, dtype=float) + run_on * np.array([math.cos(heading_rad), math.sin(heading_rad)])
+        return float(np.hypot(*rest)) <= self.cfg.arrival.radius_m
 
     def line_radius_m(self) -> float:
         """Within this distance of the goal a boat that needs way makes for the line it will hold (twice its

@@ -249,7 +249,7 @@ class Supervisor:
         distance = law.distance_to_goal(p)
         if self.arrived:
             self.reacquire_if_drifted(distance, now)
-        elif distance <= arrival.radius_m and self.helm.on_station(heading, distance):
+        elif distance <= arrival.radius_m and self.helm.on_station(heading, p - law.goal_ned):
             self.arrived, self.degraded, self.back_reason = True, False, ""
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
             how = self.helm.station_how

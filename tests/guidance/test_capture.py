@@ -295,12 +295,12 @@ def test_the_capture_search_drifts_on_what_it_is_told_and_on_nothing_when_told_n
 def first_at_rest_within(
     track: list[tuple[float, np.ndarray, float]], current: np.ndarray, stop_s: float
 ) -> float | None:
-    """The first time [s] the ideal boat lies within the arrival radius with room left for its way through the water
-    to run on over ``stop_s`` (Helm.stops_within); None: never."""
+    """The first time [s] the ideal boat lies within the arrival radius, and would stop within it as its way through
+    the water runs on over ``stop_s`` along its heading (Helm.stops_within); None: never."""
     for (t0, p0, _), (t1, p1, psi1) in itertools.pairwise(track):
         h = unit(psi1)
         water = float((p1 - p0) @ h / (t1 - t0) - current @ h)  # ground = way along the heading + current
-        if float(np.hypot(*p1)) + abs(water) * stop_s <= ARRIVAL_M:
+        if float(np.hypot(*p1)) <= ARRIVAL_M and float(np.hypot(*(p1 + water * stop_s * h))) <= ARRIVAL_M:
             return t1
     return None
 

@@ -246,24 +246,36 @@ def test_in_sheared_water_a_boat_that_needs_way_arrives_off_its_line_once_its_wa
 ) -> None:
     """In sheared water a rudder boat's line is the still-water one, and the current at the goal turns it off that
     line (13 of 14 misses in 252 sheared campaign runs had passed within the arrival radius): there it arrives off
-    its line once its way through the water, run on over its stopping time, would leave it within the radius; the
-    log says how. Crossing the goal at way it does not (nor off its line in water not seen to be sheared: above)."""
+    its line once its way through the water, run on along its heading over its stopping time, would leave it within
+    the radius; the log says how. Crossing the goal at a way that runs it on past the radius it does not (nor off
+    its line in water not seen to be sheared: above); running on toward the goal, to stop by it, it does."""
     bench = rudder_across_its_line(zshape_model)
     helm = bench.sup.helm
     helm.sheared = True  # the estimator has seen shear (latched: a property of the water)
     tau = helm.lags.stopping.lag_s
-    way = 0.1  # through the water, northward along its heading [m/s]: it would run on way x tau past where it is
-    assert way * tau > bench.cfg.arrival.radius_m
+    radius = bench.cfg.arrival.radius_m
+    way = 0.2  # through the water, northward along its heading [m/s]: it would run on way x tau past where it is
+    assert way * tau > 2.0 * radius  # from anywhere within the radius, on past it
     bench.p = np.array([-0.3, 0.0])
     helm.line.axis_rad = math.pi / 2  # its still-water line, chosen earlier: east-west, across its way north
-    for d in bench.fly(3.0, obey=False, current=(way, 0.03)):  # onto the goal at way, off its line
+    for d in bench.fly(1.5, obey=False, current=(way, 0.03)):  # across the goal at way, off its line
         assert d.state is S.GUIDING and not helm.line.holding
-    assert not bench.sup.arrived and np.hypot(*bench.p) < 0.1  # at the goal, 1.5 s within the radius
+    assert not bench.sup.arrived and np.hypot(*bench.p) < 0.05  # at the goal: 0.75 s within the radius at way
     bench.sup.take_notes()
     decisions = bench.fly(1.5, obey=False, current=(0.0, 0.03))  # its way gone: it drifts on the current only
     assert decisions[-1].state is S.ARRIVED and not helm.line.holding
     arrivals = [n.text for n in bench.sup.take_notes() if n.text.startswith("arrived")]
     assert len(arrivals) == 1 and "sheared water, off its line" in arrivals[0], arrivals
+
+    slow = rudder_across_its_line(zshape_model)  # on toward the goal at a way that stops it by the goal
+    slow.sup.helm.sheared, slow.sup.helm.line.axis_rad = True, math.pi / 2
+    slow.p = np.array([-0.2, 0.0])
+    way = 0.6 * radius / tau  # runs on 0.6 radius: anywhere within the radius it would stop beyond it (d + |u| tau)
+    arrived_at = next(
+        (slow.p.copy() for d in slow.fly(3.0, obey=False, current=(way, 0.03)) if d.state is S.ARRIVED), None
+    )
+    assert arrived_at is not None and arrived_at[0] < 0.0, arrived_at  # short of the goal, still under way
+    assert math.hypot(*arrived_at) + way * tau > radius  # where it could run on anywhere, it would not yet
 
 
 def test_a_boat_that_needs_way_does_not_arrive_on_a_tick_without_its_heading(zshape_model: Path) -> None:
