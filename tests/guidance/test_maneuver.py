@@ -14,6 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from koopguide.guidance import settings as guidance_settings
 from koopguide.guidance.estimation.turning import RATE_FLOOR, TurnAbility
 from koopguide.guidance.law.approach_path import MIN_SPEED_MPS as PATH_MIN_SPEED_MPS
 from koopguide.guidance.law.approach_path import STEP_M, STOP_GAIN, ApproachPath
@@ -36,6 +37,8 @@ from koopguide.mavlink.rover import MASK_VELOCITY_YAW, velocity_setpoint
 angles = st.floats(-math.pi, math.pi, allow_nan=False)
 speeds = st.floats(0.01, 0.3, allow_nan=False)
 currents = st.just(0.0) | st.floats(1.01 * CURRENT_MIN_MPS, 0.05)  # below CURRENT_MIN_MPS an estimate is noise
+
+FERRY_RAD = math.radians(guidance_settings.load().arrival.facing_deg)  # the shipped ferry-glide angle (Helm)
 
 
 def unit(angle: float) -> np.ndarray:
@@ -67,7 +70,7 @@ def rover_ground_velocity(heading: float, speed: float, current: np.ndarray) -> 
 @given(direction=angles, speed=speeds, c_dir=angles, c_speed=currents)
 def test_on_course_the_command_makes_good_exactly_the_wanted_ground_velocity(direction, speed, c_dir, c_speed) -> None:
     v, c = speed * unit(direction), c_speed * unit(c_dir)
-    planner = ManeuverPlanner(max_speed_mps=1.0, way_mps=0.15)
+    planner = ManeuverPlanner(max_speed_mps=1.0, way_mps=0.15, ferry_rad=FERRY_RAD)
     first = planner.plan(v, 0.0, c, pivoting())
     m = planner.plan(v, first.heading_rad, c, pivoting())  # the boat now faces the commanded heading
     made_good = rover_ground_velocity(m.heading_rad, m.speed_mps, c)
@@ -81,7 +84,7 @@ def test_on_course_the_command_makes_good_exactly_the_wanted_ground_velocity(dir
 @settings(max_examples=300, deadline=None)
 @given(direction=angles, heading=angles, speed=speeds)
 def test_ahead_or_astern_needs_no_turn_beyond_the_astern_angle(direction, heading, speed) -> None:
-    planner = ManeuverPlanner(max_speed_mps=1.0, way_mps=0.15)
+    planner = ManeuverPlanner(max_speed_mps=1.0, way_mps=0.15, ferry_rad=FERRY_RAD)
     m = planner.plan(speed * unit(direction), heading, None, pivoting())
     assert abs(wrap_pi(m.heading_rad - heading)) <= ASTERN_RAD + 1e-9
     assert m.astern == (abs(wrap_pi(direction - heading)) > ASTERN_RAD)
@@ -90,7 +93,7 @@ def test_ahead_or_astern_needs_no_turn_beyond_the_astern_angle(direction, headin
 
 
 def test_astern_has_hysteresis_so_a_goal_abeam_does_not_flip_it_every_command() -> None:
-    planner = ManeuverPlanner(max_speed_mps=1.0, way_mps=0.15)
+    planner = ManeuverPlanner(max_speed_mps=1.0, way_mps=0.15, ferry_rad=FERRY_RAD)
     behind = unit(math.radians(170.0)) * 0.1
     assert planner.plan(behind, 0.0, None, pivoting()).astern
     abeam_aft = unit(math.radians(110.0)) * 0.1  # ahead would need 110 deg: astern (70 deg) is kept
@@ -136,7 +139,7 @@ def test_keeping_station_the_ferry_angle_sets_the_boat_across_the_current_the_wa
     c = np.array([0.0, 0.03])  # toward the east: upstream is west
     for heading in (-math.pi / 2 + 0.2, math.pi / 2 - 0.2):  # bow upstream (ahead), bow downstream (astern)
         for north in (0.02, -0.02):
-            planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15)
+            planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=FERRY_RAD)
             m = planner.plan(np.array([north, 0.0]), heading, c, pivoting(), holding=True)
             assert m.astern == (heading > 0)
             made_good = rover_ground_velocity(m.heading_rad, m.speed_mps, c)
@@ -181,14 +184,14 @@ def test_making_for_a_point_at_nearly_the_currents_velocity_a_boat_drifts_on_its
 def test_drifting_onto_a_point_has_hysteresis_and_is_for_boats_that_turn_in_place_near_a_point() -> None:
     c = np.array([-0.03, 0.0])  # toward the south
     across = unit(math.pi / 2)  # w across the current, east
-    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15)
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=FERRY_RAD)
     between = 0.5 * (DRIFT_ENTER + DRIFT_LEAVE)
     for frac, drifting in [(0.5 * DRIFT_ENTER, True), (between, True), (1.1 * DRIFT_LEAVE, False)]:
         planner.plan(c + frac * 0.03 * across, math.pi, c, pivoting(), distance_m=0.3)
         assert planner.drifting == drifting, frac
     planner.plan(c + between * 0.03 * across, math.pi, c, pivoting(), distance_m=0.3)
     assert not planner.drifting  # between the two: it does not begin to drift
-    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15)
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=FERRY_RAD)
     m = planner.plan(c + 0.1 * 0.03 * across, math.pi, c, pivoting())  # following the field, no point: along w
     assert not planner.drifting and abs(wrap_pi(m.heading_rad - math.atan2(across[1], across[0]))) < 1e-9
     planner.plan(c + 0.1 * 0.03 * across, math.pi, c, rudder(), distance_m=0.3)  # a rudder boat has its line approach
@@ -200,7 +203,7 @@ def test_drifting_onto_a_point_has_hysteresis_and_is_for_boats_that_turn_in_plac
 def test_a_boat_that_turns_in_place_is_slowed_until_its_turning_circle_reaches_the_point(error, distance, rate) -> None:
     ability = pivoting()
     ability.turn_rate = rate
-    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15)
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=FERRY_RAD)
     m = planner.plan(unit(error) * 0.3, 0.0, None, ability, distance_m=distance)
     heading_error = abs(wrap_pi(m.heading_rad))
     radius = abs(m.speed_mps) / rate  # the circle it turns on at this speed [m]
@@ -212,7 +215,7 @@ def test_a_boat_that_turns_in_place_is_slowed_until_its_turning_circle_reaches_t
 @settings(max_examples=200, deadline=None)
 @given(error=st.floats(math.radians(16.0), math.radians(119.0)), wanted=st.floats(0.001, 0.3))
 def test_a_boat_that_needs_way_keeps_way_while_it_turns(error, wanted) -> None:
-    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15)
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=FERRY_RAD)
     m = planner.plan(unit(error) * wanted, 0.0, None, rudder())
     assert abs(m.speed_mps) >= 0.15 - 1e-12
 

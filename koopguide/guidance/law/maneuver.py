@@ -109,7 +109,7 @@ class ManeuverPlanner:
     """Chooses ahead or astern, and whether to drift onto a point on the current's line, each with hysteresis (its
     only state), and shapes the speed for the boat's turning."""
 
-    def __init__(self, max_speed_mps: float, way_mps: float, ferry_rad: float = math.radians(30.0)) -> None:
+    def __init__(self, max_speed_mps: float, way_mps: float, ferry_rad: float) -> None:
         self.max_speed = max_speed_mps
         self.way = min(way_mps, max_speed_mps)
         self.ferry = ferry_rad
