@@ -118,16 +118,17 @@ class Neighbours:
         yaw_rad: float | None = None,
     ) -> Filtered:
         """Filter ``v`` [m/s] with the barrier conditions at min_separation_m plus :meth:`margins` (the turn toward
-        ``v``, then once more toward the filtered velocity); then, with the heading known, (1) while the bow
-        points more than 90 deg off the filtered velocity, slow down to turn first, and (2) cap the speed so that
-        the conditions hold for the velocity the boat has *until* it has turned, along its heading plus its
-        measured drift (separation.heading_speed_cap); or, (3) where that drift alone closes on a neighbour, send the
-        boat along its heading whichever way keeps the gap (separation.heading_escape_speed; astern as velocity + yaw
-        at its heading): a skid-steer boat held across a 0.03 m/s current drifted 0.3 m onto a boat held beside it,
-        its setpoint 0.001 m/s, to 0.15 m apart (two-boat encounter, both in direct pursuit; stop 46).
-        The helm's ``yaw_rad`` pointing away from ``v`` means astern: the boat drives along its stern, and the
-        filter reasons about that way (the heading turned by pi). A velocity the filter changes goes velocity-only
-        (the boat turns to it, as the filter expects) unless the boat can go on astern along it."""
+        ``v``, then once more toward the filtered velocity); then, with the heading known, (1) while the bow points more
+        than 90 deg off the filtered velocity, slow down to turn first, and (2) cap the speed so that the conditions
+        hold for the velocity the boat has *until* it has turned, along its heading plus its measured drift
+        (separation.heading_speed_cap); or, (3) where with that drift the speed along its heading closes on a neighbour,
+        send the boat along its heading at the nearest speed, either way, that keeps the gap
+        (separation.heading_escape_speed; astern as velocity + yaw at its heading): a skid-steer boat held across a
+        0.03 m/s current drifted 0.3 m onto a boat held beside it, its setpoint 0.001 m/s, to 0.15 m apart (two-boat
+        encounter, both in direct pursuit; stop 46).
+        The helm's ``yaw_rad`` pointing away from ``v`` means astern: the boat drives along its stern, and the filter
+        reasons about that way (the heading turned by pi). A velocity the filter changes goes velocity-only (the boat
+        turns to it, as the filter expects) unless the boat can go on astern along it."""
         astern = yaw_rad is not None and _astern(v, yaw_rad)
         if heading_rad is not None and astern:
             heading_rad += math.pi
@@ -166,7 +167,8 @@ class Neighbours:
             a, b = separation.barrier_rows(p, others, distance, fleet.barrier_gain_per_s, hold)
             drift = own_v - float(own_v @ bow) * bow  # across the heading [m/s]
             if float(np.hypot(*drift)) > DRIFT_SEEN_MPS:  # (noise read as drift walked a boat off its slot)
-                escape = separation.heading_escape_speed(a, b, bow, drift, self.max_speed_mps)
+                # Rover drives it at the setpoint's speed along its heading until it has turned (as for the cap)
+                escape = separation.heading_escape_speed(a, b, bow, drift, self.max_speed_mps, speed)
             if escape is not None:  # drifting toward a neighbour: along the heading, whichever way keeps the gap
                 filtered, active = escape * bow, True
             elif speed > 1e-12:

@@ -198,3 +198,19 @@ def test_a_held_boat_drifting_across_its_bow_onto_a_neighbour_moves_along_its_he
         assert out.active and closing <= allowed + 1e-9, (out, closing)
         along = np.array(out.velocity_ned) - float(np.array(out.velocity_ned) @ h) * h
         assert np.hypot(*along) < 1e-9  # along its heading: no turn needed
+
+
+def test_a_boat_whose_way_along_its_heading_already_beats_its_drift_is_left_as_sent():
+    """The answer to drift is the speed along the heading nearest to what was sent that keeps the gap: a boat going
+    away from its neighbour at 0.2 m/s while the current sets it toward it at 0.02 m/s is left as sent (not slowed to
+    the least speed that would do)."""
+    f = Neighbours("boat2", FLEET, 0.3)
+    f.hear(ev.NeighbourStatus(0.0, 0.0, "boat1", (0.0, 0.0), (0.0, 0.0), 0.0))
+    p, west = np.array([-0.3, -0.3]), -math.pi / 2  # 0.42 m south-west of boat1, bow west
+    drift = np.array([0.03, 0.0])  # the current toward the north, all across the bow
+    assert float(drift @ -p) > 0.0  # it sets the boat toward boat1
+    sent = (0.0, -0.2)
+    out = f.keep_separation(p, sent, 0.0, 0.0, west, np.array(sent) + drift)
+    assert not out.active and out.velocity_ned == sent
+    held = f.keep_separation(p, (0.0, -0.001), 0.0, 0.0, west, drift)  # held: too slow to beat it
+    assert held.active and held.velocity_ned[1] < -0.001 and abs(held.velocity_ned[0]) < 1e-12  # on west, faster

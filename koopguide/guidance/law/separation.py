@@ -146,18 +146,18 @@ def heading_speed_cap(a: np.ndarray, b: np.ndarray, heading_ned: np.ndarray, dri
 
 
 def heading_escape_speed(
-    a: np.ndarray, b: np.ndarray, heading_ned: np.ndarray, drift_ned: np.ndarray, vmax: float
+    a: np.ndarray, b: np.ndarray, heading_ned: np.ndarray, drift_ned: np.ndarray, vmax: float, speed_mps: float = 0.0
 ) -> float | None:
-    """When the drift alone breaks a condition ``a v >= b`` (speed 0 along the heading does not keep it): the setpoint
-    speed s along the heading [m/s] of least magnitude, negative the other way, that keeps every condition as the
-    boat moves at s h + w while it holds its heading (:func:`heading_speed_cap`); None when s = 0 keeps them, or
-    no |s| <= ``vmax`` does. A held boat across a current drifts with the current's component across its bow
-    (Rover holds the speed over ground along the heading only): no speed s >= 0 along the way it was going stops
-    that, but the other way along its heading may."""
+    """When the boat's speed ``speed_mps`` along its heading (negative: the other way) with its drift breaks a
+    condition ``a v >= b`` as it moves at s h + w, holding its heading (:func:`heading_speed_cap`): the speed s along
+    the heading nearest to it that keeps every condition [m/s]; None when ``speed_mps`` keeps them, or no
+    |s| <= ``vmax`` does. A held boat across a current drifts with the current's component across its bow (Rover
+    holds the speed over ground along the heading only): no speed s >= 0 along the way it was going stops that, but
+    the other way along its heading may."""
     h = np.asarray(heading_ned, dtype=float).reshape(2)
     along = a @ h  # (k,) [m]
     need = b - a @ np.asarray(drift_ned, dtype=float).reshape(2)  # along * s >= need [m^2/s]
-    if not np.any(need > EPS):
+    if not np.any(along * speed_mps < need - EPS):
         return None
     lo, hi = -vmax, vmax
     for al, nd in zip(along, need, strict=True):
@@ -168,9 +168,7 @@ def heading_escape_speed(
             lo = max(lo, nd / al)
         else:
             hi = min(hi, nd / al)
-    if lo > hi:
-        return None
-    return lo if lo > 0.0 else hi
+    return None if lo > hi else min(max(speed_mps, lo), hi)
 
 
 def _candidates(cmd: np.ndarray, a: np.ndarray, b: np.ndarray, vmax: float) -> list[np.ndarray]:
