@@ -194,7 +194,7 @@ class Helm:
         still-water line the current turned it off for a minute and more. Taking the run-on as going anywhere
         (``d + |u| tau``) left it missing those it ran on toward the goal (stop 46)."""
         run_on = self.water_mps * self.lags.stopping.lag_s
-        rest = np.asarray(offset_ned, dtype=float) + run_on * np.array([math.cos(heading_rad), math.sin(heading_rad)])
+        rest = np.asarray(offset_ned, dtype=float) + run_on * unit(heading_rad)
         return float(np.hypot(*rest)) <= self.cfg.arrival.radius_m
 
     def line_radius_m(self) -> float:

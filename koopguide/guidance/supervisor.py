@@ -246,16 +246,15 @@ class Supervisor:
         self.helm.observe(now, heading, rate, v_est, current, estimator.seen_std_mps, estimator.shear_weight, edge)
         heading = None if sideways else heading
         self.helm.in_company = self.cfg.fleet.enabled and bool(self.neighbours.latest)
-        distance = law.distance_to_goal(p)
+        distance, error = law.distance_to_goal(p), law.goal_ned - p
         if self.arrived:
             self.reacquire_if_drifted(distance, now)
-        elif distance <= arrival.radius_m and self.helm.on_station(heading, p - law.goal_ned):
+        elif distance <= arrival.radius_m and self.helm.on_station(heading, -error):
             self.arrived, self.degraded, self.back_reason = True, False, ""
             self.arrived_t = now if self.arrived_t is None else self.arrived_t
             how = self.helm.station_how
             self._note(logging.INFO, f"arrived: {distance:.3f} m from the goal at vehicle time {now:.1f} s{how}")
         self.helm.arrived = self.arrived
-        error = law.goal_ned - p
         # drifted off, within the capture radius: station keeping (reported as guiding), not the approach's speed floor
         drifted_near = bool(self.back_reason) and distance <= arrival.capture_radius_m and not self.degraded
         state = S.GUIDING

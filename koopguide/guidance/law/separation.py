@@ -126,6 +126,24 @@ def barrier_rows(
     return a, np.sum(a * vj, axis=1) - gain_per_s * h
 
 
+def _along_heading(
+    a: np.ndarray, b: np.ndarray, heading_ned: np.ndarray, drift_ned: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each condition ``a v >= b`` for a boat moving at s h + w (speed s along the unit heading h, drift w) as
+    ``along * s >= need``: (along (k,) [m], need (k,) [m^2/s])."""
+    h = np.asarray(heading_ned, dtype=float).reshape(2)
+    return a @ h, b - a @ np.asarray(drift_ned, dtype=float).reshape(2)
+
+
+def _speed_bounds(along: np.ndarray, need: np.ndarray) -> tuple[float, float]:
+    """The speeds s [m/s] that keep the conditions ``along * s >= need`` with a component along the heading:
+    [lo, hi], from those facing along it (lower bounds) and against it (upper bounds); -inf / inf where none."""
+    ahead, back = along > 1e-12, along < -1e-12
+    lo = float(np.max(need[ahead] / along[ahead])) if ahead.any() else -math.inf
+    hi = float(np.min(need[back] / along[back])) if back.any() else math.inf
+    return lo, hi
+
+
 def heading_speed_cap(a: np.ndarray, b: np.ndarray, heading_ned: np.ndarray, drift_ned: np.ndarray) -> float:
     """The largest setpoint speed s >= 0 [m/s] at which the boat keeps every condition ``a v >= b`` *before* it
     has turned onto the setpoint's direction; ``math.inf`` when no condition bounds it, 0 when one fails at s = 0.
@@ -136,13 +154,8 @@ def heading_speed_cap(a: np.ndarray, b: np.ndarray, heading_ned: np.ndarray, dri
     (skid-steer, rudder) turns at a few degrees per second, so for seconds it moves at s h + w (h: the unit
     heading, w: the drift across it) whatever the setpoint's direction. Each condition a_j (s h + w) >= b_j
     with a_j . h < 0 (the bow toward the neighbour) bounds s <= (a_j . w - b_j) / (-a_j . h)."""
-    h = np.asarray(heading_ned, dtype=float).reshape(2)
-    along = a @ h  # (k,) [m]
-    bounded = along < -1e-12
-    if not bounded.any():
-        return math.inf
-    slack = (a @ np.asarray(drift_ned, dtype=float).reshape(2) - b)[bounded]  # [m^2/s]
-    return max(0.0, float(np.min(slack / -along[bounded])))
+    _, hi = _speed_bounds(*_along_heading(a, b, heading_ned, drift_ned))
+    return hi if hi == math.inf else max(0.0, hi)
 
 
 def heading_escape_speed(
@@ -154,20 +167,13 @@ def heading_escape_speed(
     |s| <= ``vmax`` does. A held boat across a current drifts with the current's component across its bow (Rover
     holds the speed over ground along the heading only): no speed s >= 0 along the way it was going stops that, but
     the other way along its heading may."""
-    h = np.asarray(heading_ned, dtype=float).reshape(2)
-    along = a @ h  # (k,) [m]
-    need = b - a @ np.asarray(drift_ned, dtype=float).reshape(2)  # along * s >= need [m^2/s]
+    along, need = _along_heading(a, b, heading_ned, drift_ned)
     if not np.any(along * speed_mps < need - EPS):
         return None
-    lo, hi = -vmax, vmax
-    for al, nd in zip(along, need, strict=True):
-        if abs(al) <= 1e-12:
-            if nd > EPS:
-                return None
-        elif al > 0.0:
-            lo = max(lo, nd / al)
-        else:
-            hi = min(hi, nd / al)
+    if np.any(need[np.abs(along) <= 1e-12] > EPS):  # broken across the heading, whatever the speed along it
+        return None
+    lo, hi = _speed_bounds(along, need)
+    lo, hi = max(lo, -vmax), min(hi, vmax)
     return None if lo > hi else min(max(speed_mps, lo), hi)
 
 
