@@ -90,6 +90,7 @@ class Helm:
         self.turn_probe = TurnProbe(self.cfg.command, self.law.outside_area)  # how it turns and stops, asked first
         self.planner.reset()
         self.line.reset()
+        self.line.cycle.holds_at_rest = False  # whether its autopilot drifts at speed 0 (law/creep_cycle.py)
         self.asked_heading = None
 
     def probe(self, t: float, heading_rad: float | None, p_ned: np.ndarray | None = None) -> Command | None:
@@ -154,8 +155,9 @@ class Helm:
 
     def on_station(self, heading_rad: float | None, offset_ned: np.ndarray | None = None) -> bool:
         """Whether the boat can stay where it is, ``offset_ned`` [m] from the goal (boat - goal; None: not known here).
-        A boat that needs way only once it holds its line (on it, facing along it: law/line_approach.py); crossing the
-        arrival radius at way, off the line, is not arriving. In sheared water, where its line is the still-water one
+        A boat that needs way only once it holds its line (on it, facing along it: law/line_approach.py) and would
+        come to rest within the arrival radius (:meth:`coasts_within`); crossing the arrival radius at way, off the
+        line, is not arriving. In sheared water, where its line is the still-water one
         and the current at the goal turns under it, also once its way would stop it within the arrival radius
         (:meth:`stops_within`): there no line is held, as a boat that turns in place holds none. Nor is it before the
         turn probe has told whether the boat turns in place (a rudder boat that started by the goal would otherwise be
@@ -178,12 +180,25 @@ class Helm:
             return False
         if a.needs_way:
             if self.line.holding:
-                return True
+                return self.sheared or offset_ned is None or self.coasts_within(offset_ned)
             if self.sheared and offset_ned is not None and self.stops_within(offset_ned, heading_rad):
                 self.station_how = OFF_LINE_HOW
             return bool(self.station_how)
         c = self._line_current(self._current(self.current_ned), 1.0)  # clear of its spread: a line to hold to
         return self.sheared or along_current(heading_rad, c, self.cfg.arrival.facing_deg)
+
+    def coasts_within(self, offset_ned: np.ndarray) -> bool:
+        """Whether the boat holding its line, ``offset_ned`` [m] from the goal (boat - goal), comes to rest over ground
+        within the arrival radius: its ground velocity dies away over its stopping time (estimation/speed_lag.py). A
+        kinematic rudder boat of a 2 s speed lag took on its hold crossing the goal at 0.16-0.2 m/s, was declared
+        arrived, and ran on 0.22-0.31 m (Zshape demo starts, currents toward N and W: 0 of 14 within issue 10's hold
+        bound, stop 47). Unknown at the area's edge (no ground velocity there): the hold decides. Not asked in sheared
+        water, where the current under the boat, which no command stops, is most of its ground velocity (the default
+        campaign's rudder boat then missed a double gyre start it had arrived from in 57 s)."""
+        if self.ground_ned is None:
+            return True
+        rest = np.asarray(offset_ned, dtype=float) + self.lags.stopping.lag_s * self.ground_ned
+        return float(np.hypot(*rest)) <= self.cfg.arrival.radius_m
 
     def stops_within(self, offset_ned: np.ndarray, heading_rad: float) -> bool:
         """Whether the boat, ``offset_ned`` [m] from the goal (boat - goal) and heading ``heading_rad`` [rad], would

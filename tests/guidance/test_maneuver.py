@@ -20,7 +20,7 @@ from koopguide.guidance.law.approach_path import MIN_SPEED_MPS as PATH_MIN_SPEED
 from koopguide.guidance.law.approach_path import STEP_M, STOP_GAIN, ApproachPath
 from koopguide.guidance.law.capture import ENTRY_RAD
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
-from koopguide.guidance.law.creep_cycle import CREEP_M, CREEP_MPS
+from koopguide.guidance.law.creep_cycle import BACK_MARGIN_MPS, CARRY_CHECK_S, CREEP_M, CREEP_MPS
 from koopguide.guidance.law.line_approach import EDGE_LEG_M, LineApproach
 from koopguide.guidance.law.maneuver import (
     ASTERN_RAD,
@@ -339,6 +339,50 @@ def test_holding_in_a_current_creeps_upstream_across_the_goal_then_drifts_back_a
     creep, drift = cycle[:3] + cycle[-1:], cycle[3:6]
     assert all(m.speed_mps >= CREEP_MPS and not m.astern for m in creep)  # ahead, upstream
     assert all(m.speed_mps == 0.0 for m in drift)  # the current carries it back
+
+
+@pytest.mark.parametrize("astern", [False, True])
+@pytest.mark.parametrize("carried", [False, True])
+def test_holding_a_boat_the_current_does_not_carry_at_speed_0_is_backed_down_onto_the_goal(
+    astern: bool, carried: bool
+) -> None:
+    """An autopilot without Rover's stop controller holds the boat's ground at speed 0: a rudder boat whose hold
+    began 0.2 m upstream of the goal sat there for good, sent 0 (an independent kinematic rudder boat, current
+    toward N: 0 of 3 arrived). The drift is watched: not carried back CARRY_CHECK_S after it last went upstream,
+    the boat is backed down, over ground downstream faster than the current (the water past the rudder from
+    astern), until the creep begins; a boat the current carries (after coasting upstream) is only ever sent 0."""
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.075, way_mps=0.15, approach_mps=0.15)
+    goal, current = np.zeros(2), np.array([0.03, 0.0])  # toward N: upstream is S
+    bow = 0.0 if astern else math.pi  # astern the bow lies downstream (N), ahead upstream (S)
+
+    def at(north: float, t: float) -> Maneuver:
+        p = np.array([north, 0.0])
+        line.aim(p, goal, bow, current)
+        return line.command(p, goal, bow, radius_m=1.3, current_ned=current, t=t)
+
+    north, sent = -0.2, []
+    for t in np.arange(0.0, 12.0, 0.2):
+        m = at(north, float(t))
+        assert line.holding
+        sent.append((float(t), m))
+        if carried:  # coasting upstream 0.05 m over 2 s, then carried back by the current
+            north += 0.2 * (-0.05 / 2.0 if t < 2.0 else 0.03)
+    if carried:
+        assert all(m.speed_mps == 0.0 for _, m in sent)  # the current carries it: speed 0 throughout
+        return
+    held = [m for t, m in sent if t < CARRY_CHECK_S - 0.2]
+    backed = [m for t, m in sent if t > CARRY_CHECK_S + 0.2]
+    assert all(m.speed_mps == 0.0 for m in held)  # sent 0, watched
+    for m in backed:
+        downstream = float(m.velocity_ned @ current) / 0.03
+        assert downstream >= 0.03 + BACK_MARGIN_MPS - 1e-9  # faster than the current: the water from astern
+        assert m.astern != astern  # stern first through the water (bow upstream), ahead when the bow is downstream
+        assert abs(wrap_pi(m.heading_rad - bow)) < 1e-6  # along the line
+    # backed down onto the goal, it creeps again from half of CREEP_M downstream of it (and is still backed down
+    # on the way, never sent 0 again: the boat holds its ground at rest)
+    assert at(-0.05, 12.2).velocity_ned @ current > 0.0  # downstream
+    creep = at(0.5 * CREEP_M + 0.01, 12.4)
+    assert creep.velocity_ned @ current < 0.0 and creep.astern == astern  # upstream again, the hold's own way
 
 
 def test_holding_off_the_line_a_creep_slows_to_its_end_instead_of_coasting_past_it() -> None:

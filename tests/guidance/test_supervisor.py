@@ -241,6 +241,27 @@ def test_a_boat_that_needs_way_arrives_only_once_it_holds_its_line(zshape_model:
     assert bench.fly(DT, obey=False, current=(0.0, 0.03))[-1].state is S.ARRIVED
 
 
+def test_a_boat_that_needs_way_holding_its_line_arrives_only_once_it_would_come_to_rest_within_the_radius(
+    zshape_model: Path,
+) -> None:
+    """On its line, facing along it, a rudder boat crossing the goal at way has not arrived: its ground velocity
+    runs on over its stopping time (Helm.coasts_within). A kinematic rudder boat of a 2 s speed lag took on its
+    hold crossing the goal at 0.16-0.2 m/s, was declared arrived, and ran on 0.22-0.31 m (0 of 14 Zshape missions
+    toward N and W within the hold bound). Once its way is gone, there, it arrives."""
+    bench = rudder_across_its_line(zshape_model)
+    helm = bench.sup.helm
+    tau, radius = helm.lags.stopping.lag_s, bench.cfg.arrival.radius_m
+    way = 0.2  # over ground, upstream (west) along its line [m/s]
+    assert way * tau > 2.0 * radius  # from anywhere within the radius, on past it
+    bench.p, bench.heading = np.array([0.0, 0.3]), -math.pi / 2  # downstream of the goal, bow upstream, on the line
+    helm.line.holding = True
+    crossing = bench.fly(1.5, obey=False, current=(0.0, -way))
+    assert helm.line.holding and abs(bench.p[1]) < 0.01  # on its line, at the goal
+    assert all(d.state is S.GUIDING for d in crossing) and not bench.sup.arrived
+    stopped = bench.fly(2.0, obey=False, current=(0.0, 0.0))  # its way gone, by the goal
+    assert helm.line.holding and stopped[-1].state is S.ARRIVED
+
+
 def test_in_sheared_water_a_boat_that_needs_way_arrives_off_its_line_once_its_way_would_stop_it_within_the_radius(
     zshape_model: Path,
 ) -> None:

@@ -19,7 +19,7 @@ import pytest
 from koopguide.base import data
 from koopguide.guidance.settings import GuidanceConfig
 from koopguide.harness import mission
-from tests.support import velocity_follower
+from tests.support import kinematic_rudder, velocity_follower
 
 SPEEDUP = 10.0  # mission.fly_paced flies a run again slower if the simulator could not keep this pace
 START = 1  # the Zshape demo start the CI flies (the campaign covers the others and random ones)
@@ -153,6 +153,23 @@ def test_a_vehicle_whose_velocity_through_the_water_follows_the_setpoint_arrives
     velocity_follower.install(monkeypatch, heading=heading)
     cfg, result = fly_from_demo_start(zshape_model, 3, toward, f"follow{heading[0]}{toward}", {"vehicle": "vectored"})
     assert_arrives_and_holds(cfg, result, f"velocity follower (heading {heading}), current toward {toward}")
+
+
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize(("toward", "radius_m", "tau_s"), [("N", 0.6, 1.0), ("S", 0.6, 1.0), ("W", 1.2, 2.0)])
+def test_a_kinematic_rudder_boat_that_holds_its_ground_at_speed_0_arrives_and_keeps_station(
+    zshape_model: Path, monkeypatch: pytest.MonkeyPatch, toward: str, radius_m: float, tau_s: float
+) -> None:
+    """Issue 10's third vehicle, independent of the simulator's hulls (tests/support/kinematic_rudder.py): no turn
+    without way, and an autopilot without Rover's stop controller, so speed 0 holds its ground in a current instead
+    of letting it drift. Holds that began 0.15-0.3 m upstream of the goal sat there for good, sent 0 to drift onto
+    it (0.6 m circle, 1 s lag: from the 7 Zshape demo starts, toward N 1 of 7 and toward S 2 of 7 arrived); the hold
+    now sees the boat is not carried and backs it down (28 of 28 over the four currents). With a 1.2 m circle and a
+    2 s lag it also took on its hold crossing the goal at way and ran on 0.22-0.31 m after arriving (12 of 28; toward
+    N and W none); it now arrives only once it would come to rest within the radius (28 of 28)."""
+    kinematic_rudder.install(monkeypatch, radius_m=radius_m, tau_s=tau_s)
+    cfg, result = fly_from_demo_start(zshape_model, 3, toward, f"kinrud{toward}", {"vehicle": "rudder"})
+    assert_arrives_and_holds(cfg, result, f"kinematic rudder ({radius_m} m circle, {tau_s} s lag), toward {toward}")
 
 
 def assert_arrives_and_holds(cfg: GuidanceConfig, result: mission.MissionResult, label: str) -> None:

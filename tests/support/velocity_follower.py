@@ -61,11 +61,15 @@ def install(monkeypatch: pytest.MonkeyPatch, heading: str = "fixed", tau_s: floa
         vc_n, vc_e = self.flow.velocity(n, e, t)
         n, e = n + (wn + vc_n) * dt, e + (we + vc_e) * dt
         c, s = math.cos(psi), math.sin(psi)
-        x = (n, e, psi, c * wn + s * we, -s * wn + c * we, r, *self.state[6:])
-        self.t = t + dt
-        if not self.tank.contains(n, e):
-            x = self._stop_at_wall(x)
-        self.state = x
-        self.sensors.update(self.truth())
+        settle(self, (n, e, psi, c * wn + s * we, -s * wn + c * we, r, *self.state[6:]), t, dt)
 
     monkeypatch.setattr(sim_boat.Boat, "physics_step", physics_step)
+
+
+def settle(boat: sim_boat.Boat, x: tuple[float, ...], t: float, dt: float) -> None:
+    """End a replaced physics step at state ``x``, time ``t + dt``: stopped at the tank's wall, sensed."""
+    boat.t = t + dt
+    if not boat.tank.contains(x[0], x[1]):
+        x = boat._stop_at_wall(x)
+    boat.state = x
+    boat.sensors.update(boat.truth())

@@ -39,13 +39,12 @@ turn (the autopilot reverses the rudder astern, docs/rover.md). Four modes, one 
   went the other way again as soon as that no longer led out shuttled a few centimetres each way in the area's
   corner for a minute, its bow never turning: every reversal holds the heading). After a reversal the heading is
   held until the water passes the rudder the new way (before that the rudder turns the boat the wrong way);
-* the speed over ground along the heading: at least the way the rudder needs (``way_mps``) while turning,
-  else ``gain`` (at most 1 / the boat's stopping time ``stop_s``, estimation/speed_lag.py; so do the planned
-  approach's runs) times the distance to the goal plus the station keeper's integral term along the heading
-  (PI with anti-windup, law/station.py: what holds a boat whose speed loop is not over ground); in a
-  current, a speed that would move the boat over ground one way while the water passes the rudder the
-  other way (the autopilot sets the rudder by the speed's sign) is sent as exactly 0 instead, Rover's stop
-  controller: the throttle goes off and the current carries the boat back.
+* the speed over ground along the heading: at least the way the rudder needs (``way_mps``) while turning, else
+  ``gain`` (at most 1 / the boat's stopping time ``stop_s``, estimation/speed_lag.py, as on the planned approach's
+  runs) times the distance to the goal plus the station keeper's integral term along it (PI with anti-windup,
+  law/station.py); in a current, a speed over ground one way with the water past the rudder the other (the
+  autopilot sets the rudder by the speed's sign) is sent as 0: Rover's stop controller lets the current carry
+  the boat (one that holds its ground at 0 is backed down in the hold instead, law/creep_cycle.py).
 
 Conventions: positions ``(2,)`` local NED [m], velocities NED [m/s], headings [rad] from north.
 """
@@ -89,10 +88,9 @@ EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed
 EDGE_MIN_M = 0.15  # [m]
 EDGE_SLANT = math.sin(math.radians(20.0))  # ... "leaves" when at least this fraction of the look goes outward
 EDGE_LEG_M = 0.3  # after a reversal at the edge the boat keeps its new way this far (the bow turns on the way) [m]
-# arrived and holding on a current's line, the line turns toward the estimate's direction with this time constant: in
-# water not seen to be sheared the current is steady, and its estimate's wander (the hull's sway read as current, 15
-# deg either way) left a bow that cannot turn while drifting 20 deg off a line that followed it; righting it ran a
-# rudder boat 0.2-0.45 m off (hull slipping more, Zshape start 3 toward W: 4 of 10 flights in bounds, with it 8/8) [s]
+# arrived and holding on a current's line, the line turns toward the estimate's direction with this time constant:
+# in steady water the estimate's wander (sway read as current, 15 deg either way) left a bow that cannot turn while
+# drifting 20 deg off the line; righting it ran a rudder boat 0.2-0.45 m off (4 of 10 flights in bounds, 8/8 now) [s]
 AXIS_TAU_S = 20.0
 EDGE_COURSE_M = 0.5  # a course along the line "leads out" when the point this far along it is farther out [m]
 
@@ -214,7 +212,7 @@ class LineApproach:
 
         if self.holding and self.in_current and current_ned is not None:
             return self._finish(
-                self._hold_in_current(p, goal_ned, heading_rad, delta, a, n, cross, current_ned, bias_ned),
+                self._hold_in_current(p, goal_ned, heading_rad, delta, a, n, cross, current_ned, bias_ned, t),
                 heading_rad,
                 current_ned,
                 water_mps,
@@ -287,6 +285,7 @@ class LineApproach:
         cross: float,
         current_ned: np.ndarray,
         bias_ned: np.ndarray | None,
+        t: float | None,
     ) -> Maneuver:
         """On the current's line near the goal: into the current only, ahead (bow upstream) or astern (bow
         downstream), by the creep cycle about the goal (law/creep_cycle.py), steering by LOS onto the line."""
@@ -297,8 +296,10 @@ class LineApproach:
         heading = los_heading(self.travel, delta, a, n, cross)
         to_go = float((np.asarray(goal_ned, dtype=float) - p) @ up)  # how far the goal lies upstream [m]
         bias = 0.0 if bias_ned is None else self.travel * float(np.asarray(bias_ned, dtype=float) @ unit(heading))
-        s = self.cycle.speed(to_go, cross, abs(wrap_pi(heading - heading_rad)), bias)
-        return Maneuver(heading, self.travel * max(s, MIN_SPEED_MPS) if s > 0.0 else 0.0, self.astern)
+        s = self.cycle.speed(to_go, cross, abs(wrap_pi(heading - heading_rad)), bias, t, float(np.hypot(*c)))
+        # backed down (s < 0): stern first through the water, whichever end faces upstream
+        speed = self.travel * (s if s < 0.0 else max(s, MIN_SPEED_MPS) if s > 0.0 else 0.0)
+        return Maneuver(heading, speed, self.travel > 0 if s < 0.0 else self.astern)
 
     def _planned(
         self,
@@ -354,9 +355,8 @@ class LineApproach:
         if math.hypot(along, cross) <= zone:  # the last decimetres onto the line: a search over manoeuvres
             self.path.reset()
             # within CAPTURE_M the current at the boat is near the goal's, even where the line does not follow it
-            # (self.drift, Helm._on_line): a model boat in still water there, the vortex's 0.025 m/s across a
-            # still-water line set the real one off it on every capture (rudder, vortex seeds 37-43: 236/252
-            # arrived; drifting on it, 241/252, stop 32)
+            # (self.drift, Helm._on_line): a model boat in still water there, the vortex's 0.025 m/s across a still-
+            # water line set the real one off it on every capture (rudder, vortex seeds 37-43: 236/252; 241/252 on it)
             goal, c = np.asarray(goal_ned, dtype=float), self.drift
             return self.capture.command(t, p, goal, heading_rad, water_mps, self.axis_rad, c, radius_m, outside)
         self.capture.reset()
