@@ -155,9 +155,9 @@ class Helm:
 
     def on_station(self, heading_rad: float | None, offset_ned: np.ndarray | None = None) -> bool:
         """Whether the boat can stay where it is, ``offset_ned`` [m] from the goal (boat - goal; None: not known here).
-        A boat that needs way only once it holds its line (on it, facing along it: law/line_approach.py) and would
-        come to rest within the arrival radius (:meth:`coasts_within`); crossing the arrival radius at way, off the
-        line, is not arriving. In sheared water, where its line is the still-water one
+        A boat that needs way only once it holds its line (on it, facing along it: law/line_approach.py) and, in water
+        not seen to be sheared, would come to rest within the arrival radius (:meth:`coasts_within`); crossing the
+        arrival radius at way, off the line, is not arriving. In sheared water, where its line is the still-water one
         and the current at the goal turns under it, also once its way would stop it within the arrival radius
         (:meth:`stops_within`): there no line is held, as a boat that turns in place holds none. Nor is it before the
         turn probe has told whether the boat turns in place (a rudder boat that started by the goal would otherwise be
