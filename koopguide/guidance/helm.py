@@ -195,10 +195,7 @@ class Helm:
         bound, stop 47). Unknown at the area's edge (no ground velocity there): the hold decides. Not asked in sheared
         water, where the current under the boat, which no command stops, is most of its ground velocity (the default
         campaign's rudder boat then missed a double gyre start it had arrived from in 57 s)."""
-        if self.ground_ned is None:
-            return True
-        rest = np.asarray(offset_ned, dtype=float) + self.lags.stopping.lag_s * self.ground_ned
-        return float(np.hypot(*rest)) <= self.cfg.arrival.radius_m
+        return self.ground_ned is None or self._rests_within(offset_ned, self.ground_ned)
 
     def stops_within(self, offset_ned: np.ndarray, heading_rad: float) -> bool:
         """Whether the boat, ``offset_ned`` [m] from the goal (boat - goal) and heading ``heading_rad`` [rad], would
@@ -208,8 +205,12 @@ class Helm:
         of the goal in 13 of its 14 misses of 252 (vortex and double gyre, seeds 50-52), lining its bow up on a
         still-water line the current turned it off for a minute and more. Taking the run-on as going anywhere
         (``d + |u| tau``) left it missing those it ran on toward the goal (stop 46)."""
-        run_on = self.water_mps * self.lags.stopping.lag_s
-        rest = np.asarray(offset_ned, dtype=float) + run_on * unit(heading_rad)
+        return self._rests_within(offset_ned, self.water_mps * unit(heading_rad))
+
+    def _rests_within(self, offset_ned: np.ndarray, velocity_ned: np.ndarray) -> bool:
+        """Whether a boat ``offset_ned`` [m] from the goal whose ``velocity_ned`` [m/s] dies away over its stopping time
+        (estimation/speed_lag.py: it runs on ``velocity tau``) comes to rest within the arrival radius."""
+        rest = np.asarray(offset_ned, dtype=float) + self.lags.stopping.lag_s * np.asarray(velocity_ned, dtype=float)
         return float(np.hypot(*rest)) <= self.cfg.arrival.radius_m
 
     def line_radius_m(self) -> float:

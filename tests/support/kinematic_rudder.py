@@ -24,9 +24,8 @@ import math
 import pytest
 
 from sitl import boat as sim_boat
-from sitl.guided import TargetKind
 from sitl.sensors import wrap_pi
-from tests.support.velocity_follower import settle
+from tests.support.velocity_follower import asked_target, settle
 
 
 def install(
@@ -41,10 +40,10 @@ def install(
 
     def physics_step(self: sim_boat.Boat, t: float, dt: float) -> None:
         n, e, psi, u = self.state[:4]
-        ap, target = self.autopilot, self.autopilot.target
+        target = asked_target(self)
         vc_n, vc_e = self.flow.velocity(n, e, t)
         demand, r = 0.0, 0.0
-        if ap.armed and ap.mode_name == "GUIDED" and target is not None and target.kind is TargetKind.HEADING_SPEED:
+        if target is not None:
             current_along = math.cos(psi) * vc_n + math.sin(psi) * vc_e
             demand = target.speed_mps - current_along  # over ground along the heading: the water's share taken off
             turn = abs(u) / radius_m

@@ -23,15 +23,23 @@ import math
 import pytest
 
 from sitl import boat as sim_boat
-from sitl.guided import TargetKind
+from sitl.guided import GuidedTarget, TargetKind
 from sitl.sensors import wrap_pi
+
+
+def asked_target(boat: sim_boat.Boat) -> GuidedTarget | None:
+    """The heading-and-speed target its autopilot asks it to make good; None outside GUIDED, disarmed or without one."""
+    ap = boat.autopilot
+    target = ap.target
+    if not ap.armed or ap.mode_name != "GUIDED" or target is None or target.kind is not TargetKind.HEADING_SPEED:
+        return None
+    return target
 
 
 def asked_water_velocity(boat: sim_boat.Boat) -> tuple[tuple[float, float], float | None]:
     """The velocity through the water [m/s] its autopilot's guided target asks, and the heading it asks [rad]."""
-    ap = boat.autopilot
-    target = ap.target
-    if not ap.armed or ap.mode_name != "GUIDED" or target is None or target.kind is not TargetKind.HEADING_SPEED:
+    target = asked_target(boat)
+    if target is None:
         return (0.0, 0.0), None
     return (target.speed_mps * math.cos(target.heading_rad), target.speed_mps * math.sin(target.heading_rad)), (
         target.heading_rad
