@@ -138,10 +138,11 @@ class Helm:
         self.water_mps = u
         self.ground_ned = None if at_edge else np.asarray(velocity_ned, dtype=float)  # a wall sets a boat sideways
         c = 0.0 if current_ned is None else float(np.asarray(current_ned) @ unit(heading_rad))
-        self.lags.update(t, None if at_edge else self.asked_mps, c, u)  # a wall stops a boat too
+        asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
+        pivots = None if self.ability.needs_way else asked  # a boat that turns in place may be turning first
+        self.lags.update(t, None if at_edge else self.asked_mps, c, u, pivots)  # a wall stops a boat too
         if at_edge or self.ability.moves_sideways:  # a boat that goes where it is sent turns as it will
             return
-        asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
         self.ability.update(t, asked, u, turn_rate_radps, way_known=current_ned is not None)
 
     def at_edge(self, p_ned: np.ndarray) -> bool:
@@ -257,6 +258,7 @@ class Helm:
             distance_m,
             slow_to_turn=self.cfg.command.turn_slowdown,
             holding=holding,
+            allow_astern=self.lags.sternway.able,
         )
         self.doing = DRIFT_DOING if self.planner.drifting and not holding else self.doing
         return self._maneuver(m)
@@ -276,7 +278,12 @@ class Helm:
                 return self._on_line(p_ned, heading_rad, current_ned)
             self.line.reset()
             m = self.planner.plan(
-                sp.ground_ned, heading_rad, self._current(current_ned), self.ability, slow_to_turn=False
+                sp.ground_ned,
+                heading_rad,
+                self._current(current_ned),
+                self.ability,
+                slow_to_turn=False,
+                allow_astern=self.lags.sternway.able,
             )
             return self._maneuver(m)
         self.planner.reset()
@@ -339,6 +346,7 @@ class Helm:
         self.line.aim(p_ned, self.law.goal_ned, heading_rad, c, drift, self.t if self.arrived else None)
         self.line.stop_s = self.lags.stopping.lag_s
         self.line.capture.lags_s = (self.lags.ahead.lag_s, self.lags.astern.lag_s)
+        self.line.astern_able = self.lags.sternway.able
         # in sheared water it arrives off its line at rest (stops_within): the capture search makes for that, and
         # keeps it there (once arrived, lining it up took it 0.3 m p95 off in the median double gyre run, stop 45)
         self.line.capture.point_only = self.sheared

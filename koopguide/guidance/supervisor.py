@@ -4,11 +4,11 @@
       -> InputGate / TeleportGuard -> KalmanTracker, CurrentEstimator -> GuidanceLaw / StationKeeper
       -> Decision (setpoint, state, reason, degraded, requests: set mode, arm, message intervals)
 
-States (docs/guidance.md): waiting (no heartbeat, no position, not in GUIDED, disarmed) -> guiding ->
-arrived; hold (stale position, teleporting positions, outside the domain or geofence); fault (the field
-failed, or setpoints stopped going out). ``arrived`` is left for ``guiding`` when the boat drifts beyond
-``arrival.reacquire_radius_m``; ``degraded`` marks guiding by direct pursuit of the goal after the
-progress watchdog saw no progress along the field for ``failsafe.stall_s``. Every decision has a reason.
+States (docs/guidance.md): waiting (no heartbeat, no position, not in GUIDED, disarmed) -> guiding -> arrived;
+hold (stale position, teleporting positions, outside the domain or geofence); fault (the field failed, or setpoints
+stopped going out). ``arrived`` is left for ``guiding`` when the boat drifts beyond ``arrival.reacquire_radius_m``;
+``degraded`` marks guiding by direct pursuit of the goal after the progress watchdog saw no progress along the field
+for ``failsafe.stall_s``. Every decision has a reason.
 
 Time is passed in: ``t_s`` the vehicle's clock [s], ``wall_s`` the service's monotonic clock [s] (heartbeat
 timeouts, request retries, log rate). Conventions: local NED [m], [m/s]; headings [rad] from north.
@@ -53,8 +53,7 @@ class Supervisor:
         self.progress = ProgressWatchdog(cfg.failsafe.stall_s, cfg.failsafe.stall_progress_m)
         self.helm = Helm(cfg, law)  # wanted ground velocity -> setpoint for this boat (how it turns is learned)
         self.heartbeat_wall: float | None = None  # the vehicle's last heartbeat (service clock) [s]
-        self.mode: int | None = None
-        self.armed: bool | None = None
+        self.mode, self.armed = None, None  # the vehicle's as last heard (None: not yet)
         # the state machine
         self.state, self.reason, self.degraded = S.IDLE, "not started", False
         self.arrived = False  # within the arrival radius and not since drifted beyond the reacquire radius
@@ -243,7 +242,10 @@ class Supervisor:
         current = estimator.current_ned if (heading is not None or sideways) and estimator.updates else None
         rate = self.vehicle.attitude[2] if heading is not None and self.vehicle.attitude else None
         edge = self.helm.at_edge(p)
+        astern = self.helm.lags.sternway.able
         self.helm.observe(now, heading, rate, v_est, current, estimator.seen_std_mps, estimator.shear_weight, edge)
+        if astern and not self.helm.lags.sternway.able:  # estimation/speed_lag.py SternwayTrial
+            self._note(logging.WARNING, "the boat gathered no sternway when asked astern: guiding it ahead only")
         heading = None if sideways else heading
         self.helm.in_company = self.cfg.fleet.enabled and bool(self.neighbours.latest)
         distance, error = law.distance_to_goal(p), law.goal_ned - p

@@ -41,6 +41,20 @@ def test_every_reeds_shepp_path_drives_from_the_start_to_the_goal_pose(n0, e0, h
     assert [p.length_m for p in paths] == sorted(p.length_m for p in paths)
 
 
+@settings(max_examples=300, deadline=None)
+@given(n0=coords, e0=coords, h0=angles, n1=coords, e1=coords, h1=angles, r=st.floats(0.5, 2.5))
+def test_a_boat_that_goes_ahead_only_gets_dubins_paths_between_any_two_poses(n0, e0, h0, n1, e1, h1, r) -> None:
+    """Dubins (1957): between any two poses a path of arcs and a straight, all ahead, exists; it is no shorter than
+    the Reeds-Shepp one (which may reverse) and ends at the goal pose."""
+    paths = reeds_shepp.plan((n0, e0, h0), (n1, e1, h1), r, astern=False)
+    assert paths
+    assert paths[0].length_m >= reeds_shepp.plan((n0, e0, h0), (n1, e1, h1), r)[0].length_m - 1e-6
+    for path in paths:
+        assert all(length > 0.0 for _, length in path.segments) and path.cusps == 0
+        n, e, h, direction = path.sample(0.05)[-1]
+        assert math.hypot(n - n1, e - e1) < 1e-6 and abs(wrap_pi(h - h1)) < 1e-6 and direction == 1.0
+
+
 def test_a_turn_on_the_spot_is_a_path_with_reversals_and_no_longer_than_a_loop() -> None:
     """Facing east at the goal, to face north there: within a 3 m tank only ahead-and-astern manoeuvres fit."""
     paths = reeds_shepp.plan((0.0, 0.0, math.pi / 2), (0.0, 0.0, 0.0), 1.5)
@@ -114,6 +128,24 @@ def test_a_planned_approach_ends_on_the_current_line_short_of_the_goal_at_most_a
         assert float(motion @ -end[:2]) > 0.0  # the goal lies ahead of its motion
     slack = 0.1 + 0.02 + law.outside_area(start)  # AREA_SLACK_M, and the coarser check between samples
     assert float(np.max(law.outside_area(pts[:, :2]))) <= slack
+
+
+@pytest.mark.parametrize("toward", [0.0, 90.0, 180.0, 270.0])
+def test_a_boat_that_goes_ahead_only_is_planned_ahead_onto_the_line_bow_upstream(toward: float) -> None:
+    """A boat seen to gather no sternway (estimation/speed_lag.py) holds bow upstream only, and gets there ahead:
+    from a grid of starts about the goal, facing every way."""
+    upstream = wrap_pi(math.radians(toward) + math.pi)
+    current = 0.03 * unit(math.radians(toward))
+    planned = 0
+    for n, e, h in itertools.product((-1.0, -0.4, 0.5, 1.1), (-0.9, -0.3, 0.2), np.radians([0.0, 100.0, 210.0, 300.0])):
+        path = ApproachPath(cruise_mps=0.15, max_speed_mps=0.3)
+        path.astern = False
+        ends = (upstream, wrap_pi(upstream + math.pi))
+        if path.plan(0.0, np.array([n, e]), h, np.zeros(2), ends, 1.5, None, current):
+            planned += 1
+            assert all(sample[3] == 1.0 for sample in path.samples)
+            assert abs(wrap_pi(path.final_heading - upstream)) < 1e-9
+    assert planned >= 24, planned  # not vacuous: of 48, 38 are planned (the others: no path ends near the goal)
 
 
 def test_in_still_water_the_planned_line_leaves_room_on_both_sides_of_a_goal_by_the_areas_edge(

@@ -99,6 +99,23 @@ def test_a_boat_across_its_line_near_the_goal_turns_onto_it(toward_deg: float) -
     assert t is not None and t < 60.0, t
 
 
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.floats(-CAPTURE_M, CAPTURE_M),
+    e=st.floats(-CAPTURE_M, CAPTURE_M),
+    heading=st.floats(-math.pi, math.pi),
+    toward=st.sampled_from([None, 0.0, 90.0, 180.0, 270.0]),
+)
+def test_a_boat_that_goes_ahead_only_is_given_no_manoeuvre_astern(n, e, heading, toward) -> None:
+    """A boat seen to gather no sternway (estimation/speed_lag.py): ahead or drifting, never astern."""
+    current = np.zeros(2) if toward is None else 0.03 * unit(math.radians(toward))
+    search = CaptureSearch(max_speed_mps=0.3)
+    search.astern = False
+    axis = 0.0 if toward is None else math.radians(toward) + math.pi
+    m = search.command(0.0, np.array([n, e]), np.zeros(2), heading, 0.0, axis, current, 1.3, None)
+    assert search.chosen[0] >= 0 and not m.astern
+
+
 def test_in_still_water_it_holds_any_line_through_the_goal_it_is_given() -> None:
     t, _ = capture(np.array([0.2, 0.2]), math.radians(60.0), np.zeros(2), radius_m=1.2)
     assert t is not None and t < 45.0, t

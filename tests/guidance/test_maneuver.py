@@ -21,7 +21,8 @@ from koopguide.guidance.law.approach_path import STEP_M, STOP_GAIN, ApproachPath
 from koopguide.guidance.law.capture import ENTRY_RAD
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
 from koopguide.guidance.law.creep_cycle import BACK_MARGIN_MPS, CARRY_CHECK_S, CREEP_M, CREEP_MPS
-from koopguide.guidance.law.line_approach import EDGE_LEG_M, LineApproach
+from koopguide.guidance.law.edge_reversal import EDGE_LEG_M
+from koopguide.guidance.law.line_approach import LineApproach
 from koopguide.guidance.law.maneuver import (
     ASTERN_RAD,
     DRIFT_ENTER,
@@ -540,3 +541,26 @@ def test_a_boat_slow_to_stop_is_ramped_onto_the_goal_no_faster_than_it_can_stop(
         if remaining < 0.3:
             slowing.append(abs(m.speed_mps) <= max(PATH_MIN_SPEED_MPS, path.stop_gain * remaining) + 1e-9)
     assert slowing and all(slowing)
+
+
+@pytest.mark.parametrize("toward_deg", [None, 0.0, 90.0, 180.0, 270.0])
+@pytest.mark.parametrize("facing_deg", [0.0, 90.0, 180.0, 270.0])
+def test_a_boat_that_goes_ahead_only_is_never_sent_astern_by_the_line_approach(
+    toward_deg: float | None, facing_deg: float
+) -> None:
+    """A boat seen to gather no sternway (estimation/speed_lag.py SternwayTrial), past the goal or beside it, facing
+    any way, its circle not yet measured (feedback, no plan): no K-turn legs astern and no reversal astern; in a
+    current it holds bow upstream, and a goal behind it in still water it turns round to (stop 48)."""
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.15)
+    line.astern_able = False
+    current = None if toward_deg is None else 0.03 * unit(math.radians(toward_deg))
+    goal = np.zeros(2)
+    for p in (np.array([0.4, 0.0]), np.array([0.0, 0.4]), np.array([-0.3, -0.3])):
+        heading = math.radians(facing_deg)
+        line.reset()
+        line.aim(p, goal, heading, current)
+        if current is not None:  # bow upstream, whichever way it faces
+            assert abs(wrap_pi(line.axis_rad - math.atan2(-current[1], -current[0]))) < 1e-9
+        m = line.command(p, goal, heading, radius_m=None, current_ned=current, outside=lambda q: 0.0 * q[..., 0])
+        if current is None:
+            assert not m.astern and m.speed_mps >= 0.0

@@ -1,9 +1,10 @@
 """SpeedLag: how quickly a boat's way through the water follows what it is asked, learned from its speed.
 
 Synthetic first-order stops and speed changes ahead and astern (with and without sensor noise), what does not count
-as evidence, and the real simulator's boats (the rudder boat and one of twice the mass with a weak astern): told to
-stop under Rover's stop controller, the run-on ``u tau`` the estimate predicts against the one flown; asked a speed
-astern, the way gathered within a capture manoeuvre's 2 s against the learned lag's prediction.
+as evidence, whether the boat goes astern at all (the sternway trial), and the real simulator's boats (the rudder
+boat and one of twice the mass with a weak astern): told to stop under Rover's stop controller, the run-on
+``u tau`` the estimate predicts against the one flown; asked a speed astern, the way gathered within a capture
+manoeuvre's 2 s against the learned lag's prediction, and the sternway trial passed.
 """
 
 from __future__ import annotations
@@ -15,7 +16,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from koopguide.guidance.estimation.speed_lag import MAX_GAP_S, RELAX_S, SpeedLag
+from koopguide.guidance.estimation.speed_lag import (
+    MAX_GAP_S,
+    RELAX_S,
+    TRIAL_S,
+    TRIAL_SETTLE_S,
+    BoatLags,
+    SpeedLag,
+    SternwayTrial,
+)
 from koopguide.guidance.law.approach_path import STOP_GAIN
 from tests.support.open_water import fly, make_boat
 
@@ -155,3 +164,70 @@ def test_a_hull_slow_to_gather_sternway_is_learned_so() -> None:
     for way, predicted in ((light_way, light_predicted), (heavy_way, heavy_predicted)):
         assert way < 0.0
         assert predicted == pytest.approx(way, abs=0.02)  # the first-order model's way after 2 s
+
+
+def feed_astern(trial: SternwayTrial, sternway_mps: float, seconds: float, asked_mps: float = -0.12) -> None:
+    """Ask ``asked_mps`` through the water every tick for ``seconds``; the boat gathers ``sternway_mps`` over 1 s."""
+    for k in range(round(seconds / TICK_S) + 1):
+        t = k * TICK_S
+        trial.update(t, asked_mps, -sternway_mps * min(1.0, t))
+
+
+def test_a_boat_that_gathers_no_sternway_when_asked_astern_is_judged_to_go_ahead_only() -> None:
+    """A single thruster on a motor that does not reverse: asked astern, it lies in the water (stop 48)."""
+    trial = SternwayTrial()
+    feed_astern(trial, 0.0, TRIAL_SETTLE_S + TRIAL_S - 0.3)
+    assert trial.goes_astern is None and trial.able  # not judged before the trial has been seen whole
+    feed_astern(trial, 0.0, TRIAL_SETTLE_S + TRIAL_S + 0.2)
+    assert trial.goes_astern is False and not trial.able
+
+
+@pytest.mark.parametrize("sternway", [0.03, 0.05, 0.12])
+def test_a_boat_that_goes_astern_however_weakly_passes_the_trial(sternway: float) -> None:
+    trial = SternwayTrial()
+    feed_astern(trial, sternway, TRIAL_SETTLE_S + TRIAL_S + 0.2)
+    assert trial.goes_astern is True
+    feed_astern(trial, 0.0, 10.0)  # judged once: a later stall (a wall, a line fouled) does not undo it
+    assert trial.able
+
+
+@pytest.mark.parametrize("asked", [None, 0.0, -0.015, 0.12])
+def test_no_sternway_trial_without_a_request_astern(asked: float | None) -> None:
+    """Speed 0, the creep cycle's back-down (about 0.015 m/s through the water), ahead, or no evidence (a wall):
+    nothing to judge sternway by."""
+    trial = SternwayTrial()
+    feed_astern(trial, 0.0, 20.0, asked)
+    assert trial.goes_astern is None and trial.able
+
+
+def test_short_requests_astern_are_judged_only_on_their_settled_part() -> None:
+    """Requests astern shorter than TRIAL_SETTLE_S (the way is still gathering) are no trial, however many."""
+    trial = SternwayTrial()
+    t = 0.0
+    for _ in range(20):
+        for asked in (-0.12,) * round((TRIAL_SETTLE_S - 0.3) / TICK_S) + (0.12,) * 10:
+            trial.update(t, asked, 0.0)
+            t += TICK_S
+    assert trial.goes_astern is None
+
+
+def test_the_simulators_weak_astern_hull_goes_astern() -> None:
+    """The simulator's hull of twice the mass with 45% less thrust astern (the weakest astern in the family) is not
+    taken for one that goes ahead only: asked 0.12 m/s astern from rest for 5 s, it passes the trial."""
+    boat, flow = make_boat("rudder", overrides=HEAVY)
+    trial = SternwayTrial()
+    run = fly(boat, flow, TRIAL_SETTLE_S + TRIAL_S + 0.5, mask=VELOCITY_YAW, velocity=(-0.12, 0.0), yaw=0.0)
+    for row in run[:: round(TICK_S / (run[1, 0] - run[0, 0]))]:
+        trial.update(float(row[0]), -0.12, row[4] * math.cos(row[3]) + row[5] * math.sin(row[3]))
+    assert trial.goes_astern is True
+
+
+def test_no_sternway_trial_while_the_boat_is_turned_toward_the_heading_asked() -> None:
+    """A skid-steer boat asked astern 90 deg off its heading pivots first (Rover's WP_PIVOT_ANGLE), without way: that
+    is no evidence against its astern. Within TRIAL_HEADING_RAD it is, and so is any request to a boat that does not
+    pivot (a rudder boat asked astern 50 deg off its heading lies in the water all the same)."""
+    for error_deg, verdict in ((90.0, None), (-45.0, None), (10.0, False), (None, False)):  # None: no pivots
+        lags = BoatLags(1.0, 1.0)
+        for k in range(round((TRIAL_SETTLE_S + TRIAL_S + 1.0) / TICK_S)):
+            lags.update(k * TICK_S, -0.12, 0.0, 0.0, None if error_deg is None else math.radians(error_deg))
+        assert lags.sternway.goes_astern is verdict

@@ -172,6 +172,21 @@ def test_a_kinematic_rudder_boat_that_holds_its_ground_at_speed_0_arrives_and_ke
     assert_arrives_and_holds(cfg, result, f"kinematic rudder ({radius_m} m circle, {tau_s} s lag), toward {toward}")
 
 
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize("toward", ["N", "E"])
+def test_a_kinematic_rudder_boat_that_does_not_go_astern_arrives_and_keeps_station(
+    zshape_model: Path, monkeypatch: pytest.MonkeyPatch, toward: str
+) -> None:
+    """A rudder boat whose motor does not reverse (tests/support/kinematic_rudder.py, ``astern_mps`` 0, Rover's stop
+    controller): asked astern, it lies in the water. Its planned approach asked 0.28 m/s astern for 50 s while the
+    current carried it 1 m off (from the 7 Zshape demo starts, 12 of 28 over the four currents; toward N none,
+    closest 1.1 m). The helm now sees it gather no sternway and guides it ahead only (estimation/speed_lag.py
+    ``SternwayTrial``; law/line_approach.py): 27 of 28."""
+    kinematic_rudder.install(monkeypatch, astern_mps=0.0, stops_at_zero=True)
+    cfg, result = fly_from_demo_start(zshape_model, 0, toward, f"ahead{toward}", {"vehicle": "rudder"})
+    assert_arrives_and_holds(cfg, result, f"kinematic rudder without astern, toward {toward}")
+
+
 def assert_arrives_and_holds(cfg: GuidanceConfig, result: mission.MissionResult, label: str) -> None:
     """Issue 10's bounds on the simulator's ground truth (see the module docstring)."""
     track = result.track

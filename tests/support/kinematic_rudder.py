@@ -6,9 +6,10 @@ the speed asked, 0 included (no stop controller: asked 0 in a current, it keeps 
 where Rover's throttle goes off and the boat drifts), its speed through the water following that demand with a
 first-order lag ``tau_s`` (at most ``ahead_mps`` ahead, ``astern_mps`` astern); it turns toward the heading
 asked at ``k_per_s`` times the error, but never faster than ``|u| / radius_m`` (no turn without way through the
-water, a turning circle of ``radius_m`` at any speed); no sway, no hull dynamics. It reads a guided target as
-Rover does (sitl.guided: heading and signed speed); outside GUIDED, disarmed or without a target it is asked
-nothing and drifts.
+water, a turning circle of ``radius_m`` at any speed); no sway, no hull dynamics. ``astern_mps`` 0 is a thruster
+that does not reverse; ``stops_at_zero`` gives it Rover's stop controller after all (asked 0, throttle off: it
+drifts). It reads a guided target as Rover does (sitl.guided: heading and signed speed); outside GUIDED, disarmed
+or without a target it is asked nothing and drifts.
 
 It replaces the simulator's boat physics (``sitl.boat.Boat.physics_step``) for the duration of a test; the rest
 is the real thing (the simulated autopilot's modes and setpoint rules, sensors, MAVLink over loopback, the real
@@ -35,6 +36,7 @@ def install(
     ahead_mps: float = 0.4,
     astern_mps: float = 0.15,
     k_per_s: float = 1.5,
+    stops_at_zero: bool = False,
 ) -> None:
     """Make every simulated boat this kinematic rudder boat until the test ends."""
 
@@ -46,6 +48,7 @@ def install(
         if target is not None:
             current_along = math.cos(psi) * vc_n + math.sin(psi) * vc_e
             demand = target.speed_mps - current_along  # over ground along the heading: the water's share taken off
+            demand = 0.0 if stops_at_zero and target.speed_mps == 0.0 else demand  # Rover's stop controller
             turn = abs(u) / radius_m
             r = max(-turn, min(turn, k_per_s * wrap_pi(target.heading_rad - psi)))
         u += (max(-astern_mps, min(ahead_mps, demand)) - u) * min(1.0, dt / tau_s)

@@ -21,6 +21,12 @@ along the heading: Rover holds the speed over ground), a boat's way approaches i
   beside its line for 40 s. Learned (2-3 s astern for that hull, at most 1.3 s for the simulator's), its Zshape demo
   missions met issue 10's bounds 57 of 84 times against 35 of 56 without: within the flights' spread (stop 41).
 
+Whether the boat goes astern at all is learned apart (:class:`SternwayTrial`): a single thruster on a motor that
+does not reverse (Rover clips the negative throttle to nothing) never gathers sternway, and every manoeuvre planned
+with a leg astern then stalls where that leg begins (a kinematic rudder boat without sternway, Zshape demo starts in
+cross currents: its planned approach asked 0.28 m/s astern for 50 s while the current carried it 1 m off, and it met
+issue 10's bounds 12 of 28 times, stop 48).
+
 ``T`` is fitted by least squares over windows of at least ``WINDOW_S`` while the same kind of request stands and the
 boat is ``MOVING_MPS`` or more from its target: the speed gained in a window against the shortfall integrated over
 it, ``u1 - u0 = integral((target - u) dt) / T`` (over a window, not tick by tick: the tick-to-tick noise of a
@@ -43,6 +49,14 @@ MIN_S, MAX_S = 0.5, 8.0  # the lag is kept within these [s]
 WAY_TARGET_MAX_MPS = 0.16  # the lags ahead and astern are learned from requests up to this fast through the water,
 # the capture search's (near a hull's top speed the way gathers ever slower: the heavy hull, asked 0.25 m/s astern by
 # a planned approach, fitted 5-8 s where at the search's 0.12 m/s it takes 2-3 s) [m/s]
+TRIAL_MPS = 0.05  # an astern request this fast through the water or faster is a trial of the boat's sternway [m/s]
+TRIAL_STILL_MPS = 0.01  # ... counted from when the way ahead is gone (a heavy hull with a weak astern, asked
+# astern at 0.15 m/s ahead, still had way ahead 4 s later, and was taken for one that goes ahead only) [m/s]
+TRIAL_SETTLE_S = 1.0  # ... from this long after that (the sternway takes that long to gather) [s]
+TRIAL_S = 2.0  # ... and judged once this much of it has been seen [s]
+TRIAL_HEADING_RAD = math.radians(30.0)  # ... asked within this of the boat's heading (below a pivot's)
+STERNWAY_MPS = 0.025  # the boat goes astern when its mean sternway over the trial is at least this [m/s] (the
+# simulator's hull of twice the mass with 45% less thrust astern: 0.066 m/s 2 s into a 0.12 m/s request)
 
 
 class SpeedLag:
@@ -88,20 +102,71 @@ class SpeedLag:
         return MAX_S if rate <= 1.0 / MAX_S else max(MIN_S, 1.0 / rate)
 
 
+class SternwayTrial:
+    """Whether the boat goes astern: taken to until a trial shows otherwise. A trial is ``TRIAL_S`` of astern
+    requests (``TRIAL_MPS`` or faster through the water), each counted from ``TRIAL_SETTLE_S`` after its way ahead
+    was gone (``TRIAL_STILL_MPS``); the boat goes astern if its mean sternway over them reached ``STERNWAY_MPS``.
+    Judged once (per :class:`BoatLags`)."""
+
+    def __init__(self) -> None:
+        self.goes_astern: bool | None = None  # the verdict (None: not yet judged; the boat is taken to)
+        self._since: float | None = None  # vehicle time the astern request under way began [s]
+        self._t: float | None = None  # the last sample's time [s]
+        self._seen_s = 0.0  # trial time seen [s]
+        self._sternway_m = 0.0  # sternway integrated over it [m]
+
+    @property
+    def able(self) -> bool:
+        """The boat goes astern, or has not been shown not to."""
+        return self.goes_astern is not False
+
+    def update(self, t: float, target_mps: float | None, speed_water_mps: float) -> None:
+        """One sample at vehicle time ``t``: the speed through the water asked (None: no evidence) and the way."""
+        t_last, self._t = self._t, t
+        trying = target_mps is not None and target_mps <= -TRIAL_MPS
+        if not trying or t_last is None or not 0.0 < t - t_last <= MAX_GAP_S:
+            self._since = None
+            return
+        if self._since is None:
+            if speed_water_mps > TRIAL_STILL_MPS:
+                return  # still carrying way ahead: the trial begins once that has gone
+            self._since = t
+        if self.goes_astern is not None or t - self._since < TRIAL_SETTLE_S:
+            return
+        self._seen_s += t - t_last
+        self._sternway_m += -speed_water_mps * (t - t_last)
+        if self._seen_s >= TRIAL_S:
+            self.goes_astern = bool(self._sternway_m / self._seen_s >= STERNWAY_MPS)
+
+
 class BoatLags:
-    """One boat's three lags: :attr:`stopping` (speed 0 sent), :attr:`ahead` and :attr:`astern`."""
+    """One boat's three lags: :attr:`stopping` (speed 0 sent), :attr:`ahead` and :attr:`astern`; and whether it goes
+    astern at all (:attr:`sternway`)."""
 
     def __init__(self, stop_prior_s: float, way_prior_s: float) -> None:
         self.stopping = SpeedLag(stop_prior_s)
         self.ahead, self.astern = SpeedLag(way_prior_s), SpeedLag(way_prior_s)
+        self.sternway = SternwayTrial()
 
-    def update(self, t: float, asked_mps: float | None, current_along_mps: float, speed_water_mps: float) -> None:
+    def update(
+        self,
+        t: float,
+        asked_mps: float | None,
+        current_along_mps: float,
+        speed_water_mps: float,
+        heading_error_rad: float | None = None,
+    ) -> None:
         """One sample at vehicle time ``t`` of the way ``speed_water_mps`` [m/s] under the request that stands:
         ``asked_mps``, the speed over ground along the heading last sent (negative: astern; exactly 0: Rover's stop
         controller, throttle off, toward 0 through the water; None: no evidence, such as at a wall, which stops a
-        boat too), less ``current_along_mps``, the current's component along the heading, through the water."""
+        boat too), less ``current_along_mps``, the current's component along the heading, through the water;
+        ``heading_error_rad``: how far the heading asked lies off the boat's, beyond ``TRIAL_HEADING_RAD`` no
+        sternway trial (a skid-steer boat pivots first, Rover's WP_PIVOT_ANGLE; None: a boat that does not pivot,
+        such as a rudder boat, which goes astern, or not, whatever its heading)."""
         stop = asked_mps is not None and abs(asked_mps) <= 1e-9
         target = None if asked_mps is None or stop else asked_mps - current_along_mps
+        steady = heading_error_rad is None or abs(heading_error_rad) <= TRIAL_HEADING_RAD
+        self.sternway.update(t, target if steady else None, speed_water_mps)  # astern, however fast
         target = None if target is None or abs(target) > WAY_TARGET_MAX_MPS else target
         self.stopping.update(t, 0.0 if stop else None, speed_water_mps)
         self.ahead.update(t, target if target is not None and target > 0.0 else None, speed_water_mps)

@@ -120,6 +120,7 @@ class ApproachPath:
         self.times = np.zeros(0)  # when the boat is to reach each sample [s after the plan]
         self.current = np.zeros(2)  # the current the plan was made in [m/s]
         self.stop_gain = STOP_GAIN  # speed per metre to a run's end: less for a boat slow to stop (LineApproach)
+        self.astern = True  # the boat goes astern (LineApproach): if not, Dubins' paths ending bow upstream
 
     def reset(self) -> None:
         self.samples, self.i, self.t_planned, self.final_heading = [], 0, None, None
@@ -160,10 +161,12 @@ class ApproachPath:
         for k, final in enumerate(final_headings):
             bow = unit(final)
             downstream = float(c @ bow) > 0.0
+            if downstream and not self.astern:
+                continue  # it would hold astern
             bow_cost = DOWNSTREAM_COST_M if downstream else 0.0  # it would hold astern, its rudder at its weakest
             if calm and outside is not None:  # room to hold on the line, ahead and astern
                 bow_cost += ROOM_COST * (ROOM_M - room_along_m(goal, bow, outside))
-            for way in (1.0, -1.0):  # the last FINAL_M ahead or astern, straight along the final heading
+            for way in (1.0, -1.0) if self.astern else (1.0,):  # the last FINAL_M ahead or astern, straight
                 for short in SHORT_M:  # ending this far short of the goal (the hold brings it the rest of the way)
                     back = (short + FINAL_M) * way * bow  # from the final leg's start to the path's end
                     # planned in the water (which moves at c): the final leg must start where the goal's pose will
@@ -172,7 +175,8 @@ class ApproachPath:
                     for _ in range(ARRIVAL_ITERATIONS):
                         n, e = goal - back - c * arrival_s
                         pre = (float(n), float(e), final)
-                        paths = [self._whole(start, pre, path, way, r) for path in reeds_shepp.plan(start, pre, r)]
+                        plans = reeds_shepp.plan(start, pre, r, self.astern)
+                        paths = [self._whole(start, pre, path, way, r) for path in plans]
                         if not paths or not moving:
                             break
                         arrival_s = float(self._times(paths[0].sample(CHECK_STEP_M), floor)[-1])

@@ -99,11 +99,13 @@ class CaptureSearch:
         # the autopilot's speed loop, is not in the fit)
         self.lags_s = (SPEED_LAG_S, SPEED_LAG_S)
         self.point_only = False  # no line to capture (sheared water): at rest at the goal, whatever the heading
+        self.astern = True  # the boat goes astern (estimation/speed_lag.py SternwayTrial): if not, no manoeuvre astern
         seqs = np.array(list(itertools.product(range(len(MANEUVERS)), repeat=HORIZON)))  # (S, HORIZON)
         table = np.array(MANEUVERS, dtype=float)
         self._direction = table[seqs, 0]  # (S, HORIZON)
         self._rudder = table[seqs, 1]
         self._first = seqs[:, 0]
+        self._any_astern = (self._direction < 0.0).any(axis=1)  # (S,)
 
     def reset(self) -> None:
         self.chosen, self.until = None, None
@@ -186,6 +188,9 @@ class CaptureSearch:
                 pos = pos + ground(psi, u) * SIM_DT_S
             return pos, psi, u
 
+        def either(off):  # off the line at either end (a boat that goes ahead only: bow upstream in a current)
+            return off if upstream is not None and not self.astern else np.minimum(off, math.pi - off)
+
         def pose_cost(pos, psi, u, k):  # how far from holding, a pose reached after k + 1 manoeuvres
             way = ground(psi, u)
             cost = (np.hypot(way[:, 0], way[:, 1]) / WAY_SCALE_MPS) ** 2 + LATER_COST * k  # at rest, soon
@@ -200,7 +205,7 @@ class CaptureSearch:
                 cost
                 + (pos @ normal / CROSS_SCALE_M) ** 2
                 + (pos @ a / ALONG_SCALE_M) ** 2
-                + (np.minimum(off_axis, math.pi - off_axis) / heading_scale) ** 2  # either end of the line
+                + (either(off_axis) / heading_scale) ** 2  # either end of the line (in a current: astern only)
                 + ASTERN_END_COST * downstream
             )
 
@@ -212,9 +217,11 @@ class CaptureSearch:
         # beyond the horizon: each sequence's end carried on straight ahead or astern for CONTINUE_S, then stopped,
         # credits a pose aimed at the line (a boat 0.2 m beside its line otherwise found no sequence of four that
         # got there, and drifted beside it for a minute: every turn toward the line scored worse than none)
-        for direction in (1.0, -1.0):
+        for direction in (1.0, -1.0) if self.astern else (1.0,):
             on = drive(pos, psi, u, np.full(n_seq, direction * speed), np.zeros(n_seq), CONTINUE_S)
             on = drive(*on, np.zeros(n_seq), np.zeros(n_seq), STEP_S)
             score = np.minimum(score, pose_cost(*on, HORIZON + 1))
         total = score + AREA_COST_PER_M * strayed  # out of the area already: back in first
+        if not self.astern:
+            total[self._any_astern] = np.inf
         return int(self._first[int(np.argmin(total))])

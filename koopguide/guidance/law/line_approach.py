@@ -34,11 +34,12 @@ turn (the autopilot reverses the rudder astern, docs/rover.md). Four modes, one 
   astern the bow points opposite the course;
 * ahead or astern: as the way of travel, except in a K-turn (heading error beyond ``K_TURN_RAD``), when the
   boat goes ahead and astern in turn, each leg ``LEASH_M`` past where the K-turn began, all toward the same
-  heading; and it reverses before it leaves the area it may use (the model's domain and the geofence,
-  ``outside``), where a tank's walls or the shore may be, and keeps the new way for ``EDGE_LEG_M`` (a boat that
-  went the other way again as soon as that no longer led out shuttled a few centimetres each way in the area's
-  corner for a minute, its bow never turning: every reversal holds the heading). After a reversal the heading is
-  held until the water passes the rudder the new way (before that the rudder turns the boat the wrong way);
+  heading; and it reverses before it leaves the area it may use (law/edge_reversal.py). After a reversal the
+  heading is held until the water passes the rudder the new way (before that the rudder turns the boat the wrong
+  way);
+* a boat seen not to go astern (estimation/speed_lag.py ``SternwayTrial``): ahead only. It holds bow upstream, turns
+  round (no K-turn, no reversal at the edge) where the goal lies behind it in still water, and its planned approach
+  and capture search keep ahead (Dubins' paths, no manoeuvre astern);
 * the speed over ground along the heading: at least the way the rudder needs (``way_mps``) while turning, else
   ``gain`` (at most 1 / the boat's stopping time ``stop_s``, estimation/speed_lag.py, as on the planned approach's
   runs) times the distance to the goal plus the station keeper's integral term along it (PI with anti-windup,
@@ -67,6 +68,7 @@ from koopguide.guidance.law.capture import (
     entry_rad,
 )
 from koopguide.guidance.law.creep_cycle import CreepCycle
+from koopguide.guidance.law.edge_reversal import EdgeReversal
 from koopguide.guidance.law.line_of_sight import los_course, los_heading
 from koopguide.guidance.law.maneuver import MIN_SPEED_MPS, Maneuver, capped, unit, wrap_pi
 
@@ -82,12 +84,9 @@ LEAVE_CROSS_M, LEAVE_RAD, LEAVE_ALONG_M = 0.4, math.radians(60.0), 0.8  # ... un
 ENTRY_AWAY_RAD, ENTRY_SIDE_M = math.radians(4.0), 0.02  # a boat this far off its line: creeping this little away
 UNARRIVED_LEAVE_CROSS_M = 0.15  # ... or, not yet arrived, beyond this across: the capture search (law/capture.py)
 UNARRIVED_LEAVE_RAD = math.radians(15.0)  # ... or facing off a current's line by this much (it turned under the bow)
+FERRY_RAD = math.radians(30.0)  # a boat that goes ahead only is held in a current from this far off its line
 REPLAN_OFF_LINE_RAD = math.radians(20.0)  # a path whose end is this far off the current's line is planned again
 SWAP_RAD = math.radians(30.0)  # hysteresis of the bow's end of the line (past 90 deg + this, the ends swap)
-EDGE_LOOK_S = 1.5  # reverse when the point this long ahead at the present speed (or EDGE_MIN_M) leaves the area
-EDGE_MIN_M = 0.15  # [m]
-EDGE_SLANT = math.sin(math.radians(20.0))  # ... "leaves" when at least this fraction of the look goes outward
-EDGE_LEG_M = 0.3  # after a reversal at the edge the boat keeps its new way this far (the bow turns on the way) [m]
 # arrived and holding on a current's line, the line turns toward the estimate's direction with this time constant:
 # in steady water the estimate's wander (sway read as current, 15 deg either way) left a bow that cannot turn while
 # drifting 20 deg off the line; righting it ran a rudder boat 0.2-0.45 m off (4 of 10 flights in bounds, 8/8 now) [s]
@@ -110,7 +109,7 @@ class LineApproach:
         self.travel: float | None = None  # toward the goal along the line: +1 along the axis, -1 against it
         self.astern = False  # the boat is to move stern first (on the line: travel -1; in a K-turn: by legs)
         self.pivot: np.ndarray | None = None  # where the K-turn under way began [m]
-        self.edge_leg: tuple[np.ndarray, bool] | None = None  # where a reversal at the area's edge began [m], its way
+        self.edge = EdgeReversal()  # reversing before the area's edge (law/edge_reversal.py)
         self.path = ApproachPath(approach_mps, max_speed_mps)  # a planned approach onto the line, while far from it
         self.capture = CaptureSearch(max_speed_mps)  # manoeuvres onto the line within CAPTURE_M of the goal
         self.holding = False  # on the line near the goal: feedback only (hysteresis on HOLD_* / LEAVE_*)
@@ -118,10 +117,11 @@ class LineApproach:
         self.drift: np.ndarray | None = None  # the current the capture search's model boat drifts on [m/s]
         self.aim_t: float | None = None  # vehicle time of the last aim [s]
         self.stop_s = 1.0 / STOP_GAIN  # the boat's stopping time, set by the caller (estimation/speed_lag.py) [s]
+        self.astern_able = True  # the boat goes astern, set by the caller (speed_lag.SternwayTrial): if not, ahead only
 
     def reset(self) -> None:
         self.axis_rad, self.astern, self.in_current, self.travel, self.pivot = None, False, False, None, None
-        self.edge_leg = None
+        self.edge.reset()
         self.path.reset()
         self.capture.reset()
         self.holding = False
@@ -147,6 +147,7 @@ class LineApproach:
             upstream = math.atan2(-current_ned[1], -current_ned[0])
             ref = heading_rad if self.axis_rad is None else self.axis_rad
             end = min((upstream, wrap_pi(upstream + math.pi)), key=lambda end: abs(wrap_pi(end - ref)))
+            end = end if self.astern_able else upstream  # ahead only: it holds bow upstream
             held = self.axis_rad if self.holding and self.in_current else None  # holding on the current's line
             if held is not None and t is not None and self.aim_t is not None:
                 step = min(1.0, max(t - self.aim_t, 0.0) / AXIS_TAU_S)  # it turns with AXIS_TAU_S
@@ -156,7 +157,7 @@ class LineApproach:
             to_goal = np.asarray(goal_ned, dtype=float) - np.asarray(p_ned, dtype=float)
             self.axis_rad = math.atan2(to_goal[1], to_goal[0]) if float(np.hypot(*to_goal)) > 1e-6 else heading_rad
         self.in_current, self.aim_t = current_ned is not None, t
-        if abs(wrap_pi(heading_rad - self.axis_rad)) > math.pi / 2 + SWAP_RAD:
+        if abs(wrap_pi(heading_rad - self.axis_rad)) > math.pi / 2 + SWAP_RAD and self.astern_able:
             self.axis_rad = wrap_pi(self.axis_rad + math.pi)
             self.travel = None if self.travel is None else -self.travel
 
@@ -188,6 +189,10 @@ class LineApproach:
         e = p - np.asarray(goal_ned, dtype=float)
         _, _, along, cross = self._line_frame(e)
         self.path.stop_gain = min(STOP_GAIN, 1.0 / self.stop_s)  # no ramp runs on past its end
+        if self.path.astern and not self.astern_able:  # shown not to go astern: plan again, ahead only
+            self.path.reset()
+            self.capture.reset()
+        self.path.astern = self.capture.astern = self.astern_able
         planned = (
             None
             if t is None
@@ -231,9 +236,12 @@ class LineApproach:
             self.travel = 1.0
         elif abs(along) <= leash and not inward(self.travel) and inward(-self.travel):
             self.travel = -self.travel  # not yet past the goal either way: the way that stays in the area
+        if self.travel < 0 and not (self.astern_able or self.in_current):  # ahead only: turn round to the goal
+            self.axis_rad, self.travel = wrap_pi(self.axis_rad + math.pi), 1.0
+            a, n, along, cross = self._line_frame(e)
         heading = los_heading(self.travel, delta, a, n, cross)
         error = abs(wrap_pi(heading - heading_rad))
-        if error > K_TURN_RAD:
+        if error > K_TURN_RAD and self.astern_able:
             # a K-turn: ahead and astern in turn about where it began, every leg turning the bow toward the heading,
             # each leg until the boat has gone the leash past that point along its motion
             if self.pivot is None:
@@ -244,24 +252,8 @@ class LineApproach:
         else:
             self.pivot = None
             self.astern = self.travel < 0
-        if outside is not None:  # reverse before the area's edge, or back into it (unless the other way is worse)
-            look = max(EDGE_MIN_M, EDGE_LOOK_S * speed_mps)
-            here = outside(p)
-
-            def leads_out(astern: bool) -> bool:  # heading out, more than along the edge
-                sign = -1.0 if astern else 1.0
-                onward, back = outside(p + sign * look * h), outside(p - sign * look * h)
-                return onward > here + EDGE_SLANT * look and back < onward
-
-            if self.edge_leg is not None:  # a leg away from the edge goes on for EDGE_LEG_M (the bow turns on it)
-                start, astern = self.edge_leg
-                if float(np.hypot(*(p - start))) < EDGE_LEG_M and not leads_out(astern):
-                    self.astern = astern
-                else:
-                    self.edge_leg = None
-            if self.edge_leg is None and leads_out(self.astern):
-                self.astern = not self.astern
-                self.edge_leg = (p.copy(), self.astern)
+        if outside is not None and self.astern_able:  # reverse before the area's edge, or back into it
+            self.astern = self.edge.way(p, h, speed_mps, self.astern, outside)
         sign = -1.0 if self.astern else 1.0
         turning = error > TURNING_RAD
         s = sign * min(self.max_speed, min(self.gain, 1.0 / self.stop_s) * math.hypot(along, cross))
@@ -320,7 +312,12 @@ class LineApproach:
         None on the line near the goal (feedback holds the boat there), or before the boat's turning circle has
         been measured."""
         facing = abs(wrap_pi(heading_rad - self.axis_rad))
-        if self.holding:  # in still water the boat barely moves while it holds: off by more than it could be at
+        ferry = self.in_current and not self.astern_able  # ahead only: the hold ferries it onto the line
+        if self.holding and ferry:
+            self.holding = math.hypot(along, cross) <= CAPTURE_LEAVE_M and facing <= LEAVE_RAD
+        elif ferry:
+            self.holding = math.hypot(along, cross) <= CAPTURE_M and facing <= FERRY_RAD
+        elif self.holding:  # in still water the boat barely moves while it holds: off by more than it could be at
             # the goal (twice settle_m, the arrival radius), it would stay off
             leave_cross = LEAVE_CROSS_M if self.in_current else 2.0 * self.settle_m
             if not arrived:  # a hold beside the line, short of arriving, sat there for a minute and more (astern, or

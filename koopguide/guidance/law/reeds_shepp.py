@@ -6,9 +6,11 @@ Reeds & Shepp (1990), "Optimal paths for a car that goes both forwards and backw
 cusps. The formulas below (the paper's section 8: 8.1, 8.2, 8.3, 8.7, 8.8, 8.9, 8.10, 8.11) give the base words
 from the normalised goal pose; the others follow by the paper's three symmetries: time flip (the same path
 driven the other way round in time: lengths negated), reflection (left and right turns swapped) and
-backwards (the path from the goal to the start, reversed). Every candidate is checked by driving it from the
-start: a word whose end misses the goal is dropped, so an error in a formula costs candidates, never a
-wrong path.
+backwards (the path from the goal to the start, reversed). A boat that cannot go astern gets Dubins' paths instead
+(Dubins (1957), "On curves of minimal length with a constraint on average curvature...", Am. J. Math. 79(3)): the
+four words of two arcs ahead joined by a straight (CSC), each arc up to a full turn. Every candidate is checked by
+driving it from the start: a word whose end misses the goal is dropped, so an error in a formula costs candidates,
+never a wrong path.
 
 Conventions (this module): the normalised frame of the start pose, x ahead, y to port (left), angles
 counter-clockwise [rad], lengths in turning radii; a segment is (kind, length) with kind "L" (turn to
@@ -185,6 +187,30 @@ def words(x: float, y: float, phi: float) -> Iterator[tuple[Segment, ...]]:
                     yield path
 
 
+def _mod_turn(a: float) -> float:
+    """``a`` wrapped into [0, 2 pi): an arc ahead of any length up to a full turn."""
+    return a % (2.0 * math.pi)
+
+
+def ahead_words(x: float, y: float, phi: float) -> Iterator[tuple[Segment, ...]]:
+    """Dubins' CSC words (ahead only) from (0, 0, 0) to (x, y, phi) (normalised), checked by driving them: L S L and
+    L S R from the centres of the start's port circle and the goal's, the others by reflection (port <-> starboard)."""
+    for reflect in (False, True):
+        ry, rphi = (-y, -phi) if reflect else (y, phi)
+        u, t = _polar(x - math.sin(rphi), ry - 1.0 + math.cos(rphi))  # the port circles' centres: outer tangent
+        candidates = [("LSL", (_mod_turn(t), u, _mod_turn(rphi - t)))]
+        u1, t1 = _polar(x + math.sin(rphi), ry - 1.0 - math.cos(rphi))  # port to starboard: inner tangent
+        if u1 >= 2.0:
+            u = math.sqrt(u1 * u1 - 4.0)
+            t = _mod_turn(t1 + math.atan2(2.0, u))
+            candidates.append(("LSR", (t, u, _mod_turn(t - rphi))))
+        for word, lengths in candidates:
+            path = tuple((SWAP[k] if reflect else k, v) for k, v in zip(word, lengths, strict=True) if v > ZERO)
+            ex, ey, eth = drive(path)
+            if math.hypot(ex - x, ey - y) <= END_TOLERANCE and abs(mod2pi(eth - phi)) <= END_TOLERANCE:
+                yield path
+
+
 @dataclass(frozen=True)
 class Path:
     """A planned path in local NED: from ``start`` (N [m], E [m], heading from north [rad]) along ``segments``
@@ -228,14 +254,16 @@ def _to_ned(n0: float, e0: float, psi0: float, x: float, y: float) -> tuple[floa
     return n0 + c * x + s * y, e0 + s * x - c * y
 
 
-def plan(start: tuple[float, float, float], goal: tuple[float, float, float], radius_m: float) -> list[Path]:
+def plan(
+    start: tuple[float, float, float], goal: tuple[float, float, float], radius_m: float, astern: bool = True
+) -> list[Path]:
     """Every Reeds-Shepp path from ``start`` to ``goal`` (N [m], E [m], heading from north [rad]) on arcs of
-    ``radius_m``, shortest first."""
+    ``radius_m``, shortest first; with ``astern`` False, Dubins' (ahead only)."""
     n0, e0, psi0 = start
     dn, de = goal[0] - n0, goal[1] - e0
     c, s = math.cos(psi0), math.sin(psi0)
     x = (c * dn + s * de) / radius_m  # ahead
     y = (s * dn - c * de) / radius_m  # to port
     phi = mod2pi(-(goal[2] - psi0))  # counter-clockwise
-    paths = [Path(start, radius_m, segs) for segs in words(x, y, phi)]
+    paths = [Path(start, radius_m, segs) for segs in (words if astern else ahead_words)(x, y, phi)]
     return sorted(paths, key=lambda p: p.length_m)
