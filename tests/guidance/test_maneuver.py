@@ -554,6 +554,10 @@ def test_a_boat_that_goes_ahead_only_is_never_sent_astern_by_the_line_approach(
     line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.05, way_mps=0.15, approach_mps=0.15)
     line.astern_able = False
     current = None if toward_deg is None else 0.03 * unit(math.radians(toward_deg))
+
+    def edge(q: np.ndarray) -> np.ndarray:  # a square area 0.9 m across about the goal: the boat starts by its edge
+        return np.maximum(np.abs(np.asarray(q, dtype=float)).max(axis=-1) - 0.45, 0.0)
+
     goal = np.zeros(2)
     for p in (np.array([0.4, 0.0]), np.array([0.0, 0.4]), np.array([-0.3, -0.3])):
         heading = math.radians(facing_deg)
@@ -561,6 +565,6 @@ def test_a_boat_that_goes_ahead_only_is_never_sent_astern_by_the_line_approach(
         line.aim(p, goal, heading, current)
         if current is not None:  # bow upstream, whichever way it faces
             assert abs(wrap_pi(line.axis_rad - math.atan2(-current[1], -current[0]))) < 1e-9
-        m = line.command(p, goal, heading, radius_m=None, current_ned=current, outside=lambda q: 0.0 * q[..., 0])
+        m = line.command(p, goal, heading, radius_m=None, current_ned=current, outside=edge)
         if current is None:
             assert not m.astern and m.speed_mps >= 0.0

@@ -51,7 +51,7 @@ WAY_TARGET_MAX_MPS = 0.16  # the lags ahead and astern are learned from requests
 # a planned approach, fitted 5-8 s where at the search's 0.12 m/s it takes 2-3 s) [m/s]
 TRIAL_MPS = 0.05  # an astern request this fast through the water or faster is a trial of the boat's sternway [m/s]
 TRIAL_STILL_MPS = 0.01  # ... counted from when the way ahead is gone (a heavy hull with a weak astern, asked
-# astern at 0.15 m/s ahead, still had way ahead 4 s later, and was taken for one that goes ahead only) [m/s]
+# astern at 0.19 m/s ahead, still had way ahead 2.5 s later, and was taken for one that goes ahead only) [m/s]
 TRIAL_SETTLE_S = 1.0  # ... from this long after that (the sternway takes that long to gather) [s]
 TRIAL_S = 2.0  # ... and judged once this much of it has been seen [s]
 TRIAL_HEADING_RAD = math.radians(30.0)  # ... asked within this of the boat's heading (below a pivot's)
@@ -110,7 +110,7 @@ class SternwayTrial:
 
     def __init__(self) -> None:
         self.goes_astern: bool | None = None  # the verdict (None: not yet judged; the boat is taken to)
-        self._since: float | None = None  # vehicle time the astern request under way began [s]
+        self._since: float | None = None  # vehicle time the request astern under way found the way ahead gone [s]
         self._t: float | None = None  # the last sample's time [s]
         self._seen_s = 0.0  # trial time seen [s]
         self._sternway_m = 0.0  # sternway integrated over it [m]

@@ -205,7 +205,7 @@ class CaptureSearch:
                 cost
                 + (pos @ normal / CROSS_SCALE_M) ** 2
                 + (pos @ a / ALONG_SCALE_M) ** 2
-                + (either(off_axis) / heading_scale) ** 2  # either end of the line (in a current: astern only)
+                + (either(off_axis) / heading_scale) ** 2  # either end of the line (ahead only: its bow end)
                 + ASTERN_END_COST * downstream
             )
 
