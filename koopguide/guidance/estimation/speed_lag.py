@@ -59,6 +59,12 @@ STERNWAY_MPS = 0.025  # the boat goes astern when its mean sternway over the tri
 # simulator's hull of twice the mass with 45% less thrust astern: 0.066 m/s 2 s into a 0.12 m/s request)
 
 
+def follows(t_last: float | None, t: float) -> bool:
+    """Whether a sample at ``t`` [s] continues the one at ``t_last`` (None: none yet): later, by ``MAX_GAP_S`` at
+    most."""
+    return t_last is not None and 0.0 < t - t_last <= MAX_GAP_S
+
+
 class SpeedLag:
     """Fold in one sample per command with :meth:`update`; read :attr:`lag_s`."""
 
@@ -79,7 +85,7 @@ class SpeedLag:
             fade = math.exp(-(t - self._t) / RELAX_S)
             self._sxx, self._sxy = self._sxx * fade, self._sxy * fade
         u, t_last, gap_last = speed_water_mps, self._t, self._gap
-        broken = t_last is None or not 0.0 < t - t_last <= MAX_GAP_S
+        broken = not follows(t_last, t)
         gap = 0.0 if target_mps is None else target_mps - u
         self._t, self._gap = t, gap
         starts = target_mps is not None and abs(gap) >= MOVING_MPS
@@ -124,7 +130,7 @@ class SternwayTrial:
         """One sample at vehicle time ``t``: the speed through the water asked (None: no evidence) and the way."""
         t_last, self._t = self._t, t
         trying = target_mps is not None and target_mps <= -TRIAL_MPS
-        if not trying or t_last is None or not 0.0 < t - t_last <= MAX_GAP_S:
+        if not trying or not follows(t_last, t):
             self._since = None
             return
         if self._since is None:

@@ -56,23 +56,27 @@ def _tau_omega(u: float, v: float, xi: float, eta: float, phi: float) -> tuple[f
 
 
 # ---- the base words (Reeds & Shepp 1990, section 8); each returns the signed lengths or None -------------------
-def _lsl(x: float, y: float, phi: float) -> tuple[float, ...] | None:  # 8.1: L+ S+ L+
+# (the CSC words take ``wrap``, how their arcs' angles wrap: mod2pi, or _mod_turn for Dubins' arcs of up to a turn)
+def _lsl(x: float, y: float, phi: float, wrap: Callable[[float], float] = mod2pi) -> tuple[float, ...] | None:
+    # 8.1: L+ S+ L+
     u, t = _polar(x - math.sin(phi), y - 1.0 + math.cos(phi))
+    t = wrap(t)
     if t >= -ZERO:
-        v = mod2pi(phi - t)
+        v = wrap(phi - t)
         if v >= -ZERO:
             return t, u, v
     return None
 
 
-def _lsr(x: float, y: float, phi: float) -> tuple[float, ...] | None:  # 8.2: L+ S+ R+
+def _lsr(x: float, y: float, phi: float, wrap: Callable[[float], float] = mod2pi) -> tuple[float, ...] | None:
+    # 8.2: L+ S+ R+
     u1, t1 = _polar(x + math.sin(phi), y - 1.0 - math.cos(phi))
     u1 *= u1
     if u1 < 4.0:
         return None
     u = math.sqrt(u1 - 4.0)
-    t = mod2pi(t1 + math.atan2(2.0, u))
-    v = mod2pi(t - phi)
+    t = wrap(t1 + math.atan2(2.0, u))
+    v = wrap(t - phi)
     return (t, u, v) if t >= -ZERO and v >= -ZERO else None
 
 
@@ -182,8 +186,7 @@ def words(x: float, y: float, phi: float) -> Iterator[tuple[Segment, ...]]:
                 if backwards:
                     segs.reverse()
                 path = tuple((k, t) for k, t in segs if abs(t) > ZERO)
-                ex, ey, eth = drive(path)
-                if math.hypot(ex - x, ey - y) <= END_TOLERANCE and abs(mod2pi(eth - phi)) <= END_TOLERANCE:
+                if _reaches(path, x, y, phi):
                     yield path
 
 
@@ -193,22 +196,22 @@ def _mod_turn(a: float) -> float:
 
 
 def ahead_words(x: float, y: float, phi: float) -> Iterator[tuple[Segment, ...]]:
-    """Dubins' CSC words (ahead only) from (0, 0, 0) to (x, y, phi) (normalised), checked by driving them: L S L and
-    L S R from the centres of the start's port circle and the goal's, the others by reflection (port <-> starboard)."""
+    """Dubins' CSC words (ahead only) from (0, 0, 0) to (x, y, phi) (normalised), checked by driving them: the base
+    words L S L and L S R with arcs of up to a full turn, the others by reflection (port <-> starboard)."""
     for reflect in (False, True):
-        ry, rphi = (-y, -phi) if reflect else (y, phi)
-        u, t = _polar(x - math.sin(rphi), ry - 1.0 + math.cos(rphi))  # the port circles' centres: outer tangent
-        candidates = [("LSL", (_mod_turn(t), u, _mod_turn(rphi - t)))]
-        u1, t1 = _polar(x + math.sin(rphi), ry - 1.0 - math.cos(rphi))  # port to starboard: inner tangent
-        if u1 >= 2.0:
-            u = math.sqrt(u1 * u1 - 4.0)
-            t = _mod_turn(t1 + math.atan2(2.0, u))
-            candidates.append(("LSR", (t, u, _mod_turn(t - rphi))))
-        for word, lengths in candidates:
+        for word, formula in (("LSL", _lsl), ("LSR", _lsr)):
+            lengths = formula(x, -y if reflect else y, -phi if reflect else phi, _mod_turn)
+            if lengths is None:
+                continue
             path = tuple((SWAP[k] if reflect else k, v) for k, v in zip(word, lengths, strict=True) if v > ZERO)
-            ex, ey, eth = drive(path)
-            if math.hypot(ex - x, ey - y) <= END_TOLERANCE and abs(mod2pi(eth - phi)) <= END_TOLERANCE:
+            if _reaches(path, x, y, phi):
                 yield path
+
+
+def _reaches(path: tuple[Segment, ...], x: float, y: float, phi: float) -> bool:
+    """Whether ``path`` driven from (0, 0, 0) ends on the pose (x, y, phi) (normalised)."""
+    ex, ey, eth = drive(path)
+    return math.hypot(ex - x, ey - y) <= END_TOLERANCE and abs(mod2pi(eth - phi)) <= END_TOLERANCE
 
 
 @dataclass(frozen=True)
