@@ -13,10 +13,13 @@ setup:
 demo: setup
 	$(VENV)/bin/koopguide demo --out $(OUT)
 
+# The whole suite: the closed-loop flights (marker `flight`, most of the time) on two workers, the rest after
+# them in one process (its timing tests measure an unloaded machine). A plain `pytest` runs it all in one.
 test: setup
 	$(VENV)/bin/ruff check koopguide sitl tests examples
 	$(VENV)/bin/lint-imports
-	$(VENV)/bin/python -m pytest -q
+	$(VENV)/bin/python -m pytest -q -m flight -n 2
+	$(VENV)/bin/python -m pytest -q -m "not flight"
 
 bench: setup
 	$(VENV)/bin/koopguide bench speed

@@ -16,6 +16,8 @@ from koopguide.guidance import settings
 from koopguide.harness import fleet_encounters as fe
 from koopguide.model.learn.export import train_to_file
 
+pytestmark = pytest.mark.flight  # closed-loop flights: `make test` runs them on two workers (pyproject.toml)
+
 
 @pytest.fixture(scope="module")
 def line_model(tmp_path_factory: pytest.TempPathFactory) -> Path:

@@ -23,6 +23,8 @@ from koopguide.harness import mission
 from sitl import config as sitl_config
 from tests.support.status_samples import free_port
 
+pytestmark = pytest.mark.flight  # closed-loop flights: `make test` runs them on two workers (pyproject.toml)
+
 SPEEDUP = 10.0  # mission.fly_paced flies a run again slower if the simulator could not keep this pace
 ARRIVE_M = 0.15
 

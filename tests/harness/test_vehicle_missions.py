@@ -21,6 +21,8 @@ from koopguide.guidance.settings import GuidanceConfig
 from koopguide.harness import mission
 from tests.support import kinematic_rudder, velocity_follower
 
+pytestmark = pytest.mark.flight  # closed-loop flights: `make test` runs them on two workers (pyproject.toml)
+
 SPEEDUP = 10.0  # mission.fly_paced flies a run again slower if the simulator could not keep this pace
 START = 1  # the Zshape demo start the CI flies (the campaign covers the others and random ones)
 ARRIVE_M, ARRIVE_S = 0.15, 75.0
