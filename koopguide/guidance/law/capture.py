@@ -105,7 +105,7 @@ class CaptureSearch:
         self._direction = table[seqs, 0]  # (S, HORIZON)
         self._rudder = table[seqs, 1]
         self._first = seqs[:, 0]
-        self._any_astern = (self._direction < 0.0).any(axis=1)  # (S,)
+        self._ahead = np.flatnonzero(~(self._direction < 0.0).any(axis=1))  # the sequences with no leg astern
 
     def reset(self) -> None:
         self.chosen, self.until = None, None
@@ -162,7 +162,9 @@ class CaptureSearch:
     ) -> int:
         """Index into ``MANEUVERS`` of the first manoeuvre of the best-scoring sequence (``c``: the current, zeros
         in still water)."""
-        n_seq = len(self._first)
+        rows = slice(None) if self.astern else self._ahead  # a boat that goes ahead only: no sequence astern
+        ways, rudders, firsts = self._direction[rows], self._rudder[rows], self._first[rows]
+        n_seq = len(firsts)
         radius = min(MAX_RADIUS_M, max(MIN_RADIUS_M, radius_m))
         speed = self.speed(c)
         p0 = np.asarray(p_ned, dtype=float)
@@ -210,7 +212,7 @@ class CaptureSearch:
             )
 
         for k in range(HORIZON):
-            pos, psi, u = drive(pos, psi, u, self._direction[:, k] * speed, self._rudder[:, k], STEP_S)
+            pos, psi, u = drive(pos, psi, u, ways[:, k] * speed, rudders[:, k], STEP_S)
             if outside is not None:
                 strayed = np.maximum(strayed, np.asarray(outside(pos + goal_ned), dtype=float))
             score = np.minimum(score, pose_cost(pos, psi, u, k))  # the best pose along the sequence
@@ -222,6 +224,4 @@ class CaptureSearch:
             on = drive(*on, np.zeros(n_seq), np.zeros(n_seq), STEP_S)
             score = np.minimum(score, pose_cost(*on, HORIZON + 1))
         total = score + AREA_COST_PER_M * strayed  # out of the area already: back in first
-        if not self.astern:
-            total[self._any_astern] = np.inf
-        return int(self._first[int(np.argmin(total))])
+        return int(firsts[int(np.argmin(total))])
