@@ -128,6 +128,8 @@ class SternwayTrial:
 
     def update(self, t: float, target_mps: float | None, speed_water_mps: float) -> None:
         """One sample at vehicle time ``t``: the speed through the water asked (None: no evidence) and the way."""
+        if self.goes_astern is not None:  # judged once
+            return
         t_last, self._t = self._t, t
         trying = target_mps is not None and target_mps <= -TRIAL_MPS
         if not trying or not follows(t_last, t):
@@ -137,7 +139,7 @@ class SternwayTrial:
             if speed_water_mps > TRIAL_STILL_MPS:
                 return  # still carrying way ahead: the trial begins once that has gone
             self._since = t
-        if self.goes_astern is not None or t - self._since < TRIAL_SETTLE_S:
+        if t - self._since < TRIAL_SETTLE_S:
             return
         self._seen_s += t - t_last
         self._sternway_m += -speed_water_mps * (t - t_last)
