@@ -53,16 +53,13 @@ class Helm:
     """Call :meth:`observe` once per command with the boat's state, then :meth:`near` or :meth:`follow`."""
 
     def __init__(self, cfg: GuidanceConfig, law: GuidanceLaw) -> None:
-        self.cfg, self.law = cfg, law
+        self.cfg, self.law, command = cfg, law, cfg.command
         self.planner = ManeuverPlanner(
-            cfg.command.max_speed_mps, cfg.command.turn_speed_mps, math.radians(cfg.arrival.facing_deg)
+            command.max_speed_mps, command.turn_speed_mps, math.radians(cfg.arrival.facing_deg)
         )
+        gain, settle = cfg.arrival.station_gain, 0.5 * cfg.arrival.radius_m
         self.line = LineApproach(
-            cfg.command.max_speed_mps,
-            cfg.arrival.station_gain,
-            0.5 * cfg.arrival.radius_m,
-            cfg.command.turn_speed_mps,
-            cfg.command.approach_speed_mps,
+            command.max_speed_mps, gain, settle, command.turn_speed_mps, command.approach_speed_mps
         )
         self.speed_mps = 0.0  # the boat's ground speed at the last observation [m/s]
         self.water_mps = 0.0  # ... and its speed through the water along its heading (negative: astern) [m/s]
@@ -90,7 +87,6 @@ class Helm:
         self.turn_probe = TurnProbe(self.cfg.command, self.law.outside_area)  # how it turns and stops, asked first
         self.planner.reset()
         self.line.reset()
-        self.line.cycle.holds_at_rest = False  # whether its autopilot drifts at speed 0 (law/creep_cycle.py)
         self.asked_heading = None
 
     def probe(self, t: float, heading_rad: float | None, p_ned: np.ndarray | None = None) -> Command | None:
@@ -220,10 +216,13 @@ class Helm:
         ``LINE_LEAVE`` times as far (without the hysteresis a boat about that distance out, whose approach path
         begins with a leg astern, crossed it to and fro: every crossing dropped the path and the next one planned
         another, and a rudder boat that slips more than the simulator's (Y_v -3 kg/s) backed and filled 2 m out
-        for 18 s, Zshape demo start 3 in a current toward the west, stop 35)."""
+        for 18 s, Zshape demo start 3 in a current toward the west, stop 35), nor while its planned approach takes it
+        further (a kinematic rudder boat of a 0.6 m circle, planned a leg astern 1.1 m out, left it 1.5 m out and
+        followed the field back for 9 s, stop 50)."""
         radius = self.ability.radius_m if self.ability.radius_m is not None else DEFAULT_RADIUS_M
         making = LINE_LEAVE if self.line.axis_rad is not None else 1.0  # making for the line already
-        return max(self.cfg.arrival.capture_radius_m, making * LINE_RADII * radius if self.ability.needs_way else 0.0)
+        way = max(making * LINE_RADII * radius, self.line.path.reach_m(self.law.goal_ned))
+        return max(self.cfg.arrival.capture_radius_m, way if self.ability.needs_way else 0.0)
 
     def near(
         self,
@@ -347,6 +346,7 @@ class Helm:
         self.line.stop_s = self.lags.stopping.lag_s
         self.line.capture.lags_s = (self.lags.ahead.lag_s, self.lags.astern.lag_s)
         self.line.astern_able = self.lags.sternway.able
+        self.line.cycle.holds_at_rest = self.line.capture.holds_at_rest = self.lags.rest.holds
         # in sheared water it arrives off its line at rest (stops_within): the capture search makes for that, and
         # keeps it there (once arrived, lining it up took it 0.3 m p95 off in the median double gyre run, stop 45)
         self.line.capture.point_only = self.sheared

@@ -192,10 +192,8 @@ class Supervisor:
         if not self.link_up(wall):
             if self.link_was_up:
                 self.link_was_up = False
-                self._note(
-                    logging.WARNING,
-                    f"vehicle heartbeat lost for {cfg.mavlink.link_timeout_s:.1f} s; waiting for the link",
-                )
+                lost = f"vehicle heartbeat lost for {cfg.mavlink.link_timeout_s:.1f} s; waiting for the link"
+                self._note(logging.WARNING, lost)
             return self._out(ZERO, S.WAITING, "no vehicle heartbeat", send=False, t=now)
         requests = self.schedule.streams(self.vehicle.position_age(now), wall)
         if self.operator_hold is not None:  # before everything but the link: no mode change, no arming
@@ -242,10 +240,12 @@ class Supervisor:
         current = estimator.current_ned if (heading is not None or sideways) and estimator.updates else None
         rate = self.vehicle.attitude[2] if heading is not None and self.vehicle.attitude else None
         edge = self.helm.at_edge(p)
-        astern = self.helm.lags.sternway.able
+        astern, holds = self.helm.lags.sternway.able, self.helm.lags.rest.holds
         self.helm.observe(now, heading, rate, v_est, current, estimator.seen_std_mps, estimator.shear_weight, edge)
         if astern and not self.helm.lags.sternway.able:  # estimation/speed_lag.py SternwayTrial
             self._note(logging.WARNING, "the boat gathered no sternway when asked astern: guiding it ahead only")
+        if self.helm.lags.rest.holds and not holds:  # estimation/speed_lag.py RestHold
+            self._note(logging.WARNING, "speed 0 holds the boat's ground against the current: it is modelled so")
         heading = None if sideways else heading
         self.helm.in_company = self.cfg.fleet.enabled and bool(self.neighbours.latest)
         distance, error = law.distance_to_goal(p), law.goal_ned - p

@@ -614,3 +614,24 @@ def test_a_turn_at_the_area_edge_does_not_teach_the_helm_how_the_boat_turns(law:
         readings[at_edge] = helm.ability.radius_m
     assert readings[True] is None
     assert readings[False] == pytest.approx(u / rate, rel=0.05)
+
+
+def test_a_boat_on_a_planned_approach_that_swings_wide_is_not_sent_back_to_follow_the_field(law: GuidanceLaw) -> None:
+    """A boat that needs way makes for its line within two turning radii of the goal and follows the field again only
+    beyond LINE_LEAVE times that; a planned approach that begins with a leg astern may take it further (a 0.6 m
+    circle, 1.1 m out: out to 1.5 m, back to the field for 9 s, stop 50). While the plan stands, its reach counts."""
+    from koopguide.guidance.helm import LINE_LEAVE, LINE_RADII, Helm
+    from koopguide.guidance.law.approach_path import REPLAN_M
+
+    helm = Helm(guidance_settings.load(), law)
+    helm.ability.needs_way, helm.ability.radius_m = True, 0.6
+    helm.line.axis_rad = math.pi  # making for its line already (bow upstream, the current toward N)
+    assert helm.line_radius_m() == pytest.approx(LINE_LEAVE * LINE_RADII * 0.6)
+    goal = law.goal_ned
+    current, start = np.array([0.03, 0.0]), goal + np.array([1.2, 0.0])  # 1.2 m downstream, heading east
+    assert helm.line.path.plan(0.0, start, 0.5 * math.pi, goal, (math.pi,), 0.6, None, current)
+    farthest = float(np.max(np.hypot(*(helm.line.path.ground_ned - goal).T)))
+    assert farthest + REPLAN_M > LINE_LEAVE * LINE_RADII * 0.6  # this plan swings wider than that
+    assert helm.line_radius_m() == pytest.approx(farthest + REPLAN_M)
+    helm.line.path.reset()
+    assert helm.line_radius_m() == pytest.approx(LINE_LEAVE * LINE_RADII * 0.6)

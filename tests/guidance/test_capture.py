@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from koopguide.guidance.law.capture import CAPTURE_M, ENTRY_CROSS_M, ENTRY_RAD, MANEUVERS, STEP_S, CaptureSearch
+from koopguide.guidance.law.line_approach import FERRY_RAD
 from koopguide.guidance.law.maneuver import unit, wrap_pi
 
 ARRIVAL_M = 0.15  # the default arrival radius
@@ -42,13 +43,17 @@ def fly(
     axis: float | None = None,
     told: np.ndarray | None = None,
     point_only: bool = False,
+    holds_ground: bool = False,
+    astern: bool = True,
 ) -> tuple[list[tuple[float, np.ndarray, float]], float]:
     """Drive the ideal boat by the search alone from ``start`` (the goal at the origin, the line along the current,
     or north in still water, unless ``axis`` is given) for ``limit_s`` or until ``until(t, p, psi)``: its track
     (t, p, psi) and the largest speed asked. ``told``: the current the search is told (default: the one there);
-    ``point_only``: the search's (sheared water: no line)."""
+    ``point_only``: the search's (sheared water: no line); ``holds_ground``: the boat holds its ground along its
+    heading at speed 0 (no stop controller), and the search knows it; ``astern``: the boat goes astern (else its
+    motor does not reverse), and the search knows it."""
     search = CaptureSearch(max_speed_mps=0.3)
-    search.point_only = point_only
+    search.point_only, search.holds_at_rest, search.astern = point_only, holds_ground, astern
     still = float(np.hypot(*current)) == 0.0
     axis = (0.0 if still else math.atan2(-current[1], -current[0])) if axis is None else axis
     told = (None if still else current) if told is None else told
@@ -58,7 +63,8 @@ def fly(
         m = search.command(t, p, np.zeros(2), psi, water, axis, told, radius_m, outside)
         fastest = max(fastest, abs(m.speed_mps))
         h = unit(psi)
-        target = 0.0 if m.speed_mps == 0.0 else m.speed_mps - float(current @ h)  # through the water
+        target = 0.0 if m.speed_mps == 0.0 and not holds_ground else m.speed_mps - float(current @ h)  # in the water
+        target = target if astern else max(target, 0.0)
         water += (target - water) * dt / 1.0  # Rover's speed loop and the hull: about 1 s
         rate = abs(water) / radius_m
         psi = wrap_pi(psi + max(-rate * dt, min(rate * dt, wrap_pi(m.heading_rad - psi))))
@@ -346,3 +352,21 @@ def test_with_no_line_to_capture_the_search_brings_the_boat_to_rest_at_the_goal_
             lined_up.append(t if holds(p, psi, axis) else 60.0)
     assert max(times) < 10.0, times
     assert sum(times) < sum(lined_up), (times, lined_up)
+
+
+def test_a_boat_that_holds_its_ground_at_speed_0_is_modelled_so_and_turned_onto_its_line() -> None:
+    """A rudder boat whose motor does not reverse and whose autopilot holds its ground at speed 0 (no stop
+    controller), 0.37 m from the goal and 47 deg off its line in a current toward N (stop 49's trace): a search that
+    drifted its model boat at speed 0 sent 0 for 20 s, and the boat crept across the goal still 47 deg off its line,
+    held along its heading. Knowing (``holds_at_rest``), the search turns it to within the hold's take-on for a boat
+    that goes ahead only (within CAPTURE_M, FERRY_RAD off its line: law/line_approach.py)."""
+    current, axis = np.array([0.03, 0.0]), math.pi  # toward N: the bow's end of the line upstream (S)
+
+    def taken_on(t: float, p: np.ndarray, psi: float) -> bool:
+        return float(np.hypot(*p)) <= CAPTURE_M and abs(wrap_pi(psi - axis)) <= FERRY_RAD
+
+    start, heading = np.array([-0.27, -0.25]), math.radians(133.0)
+    track, fastest = fly(start, heading, current, 0.6, limit_s=20.0, until=taken_on, holds_ground=True, astern=False)
+    t, p, psi = track[-1]
+    assert taken_on(t, p, psi), (t, p.round(3).tolist(), math.degrees(psi))
+    assert fastest <= 0.3

@@ -4,7 +4,8 @@ Synthetic first-order stops and speed changes ahead and astern (with and without
 as evidence, whether the boat goes astern at all (the sternway trial), and the real simulator's boats (the rudder
 boat and one of twice the mass with a weak astern): told to stop under Rover's stop controller, the run-on
 ``u tau`` the estimate predicts against the one flown; asked a speed astern, the way gathered within a capture
-manoeuvre's 2 s against the learned lag's prediction, and the sternway trial passed.
+manoeuvre's 2 s against the learned lag's prediction, and the sternway trial passed; whether speed 0 lets the boat
+drift or holds its ground (the simulator's Rover stop controller against a kinematic boat without one).
 """
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ from hypothesis import strategies as st
 from koopguide.guidance.estimation.speed_lag import (
     MAX_GAP_S,
     RELAX_S,
+    REST_CURRENT_MPS,
+    REST_S,
+    REST_SETTLE_LAGS,
     TRIAL_S,
     TRIAL_SETTLE_S,
     BoatLags,
@@ -26,7 +30,8 @@ from koopguide.guidance.estimation.speed_lag import (
     SternwayTrial,
 )
 from koopguide.guidance.law.approach_path import STOP_GAIN
-from tests.support.open_water import fly, make_boat
+from tests.support import kinematic_rudder
+from tests.support.open_water import current, fly, make_boat
 
 TICK_S = 0.1  # the service's command period [s]
 PRIOR_S = 1.0 / STOP_GAIN  # the stopping time the helm assumes before it has seen a stop [s]
@@ -252,3 +257,70 @@ def test_no_sternway_trial_while_the_boat_is_turned_toward_the_heading_asked() -
         for k in range(round((TRIAL_SETTLE_S + TRIAL_S + 1.0) / TICK_S)):
             lags.update(k * TICK_S, -0.12, 0.0, 0.0, None if error_deg is None else math.radians(error_deg))
         assert lags.sternway.goes_astern is verdict
+
+
+def feed_rest(lags: BoatLags, seconds: float, current_along: float, ground_along: float, asked: float = 0.0) -> None:
+    """Ask ``asked`` over ground along the heading every tick for ``seconds`` from rest, the boat moving over ground
+    at ``ground_along`` along its heading, the current's component along it ``current_along``."""
+    for k in range(round(seconds / TICK_S) + 1):
+        lags.update(k * TICK_S, asked, current_along, ground_along - current_along)
+
+
+def test_a_boat_that_holds_its_ground_at_speed_0_is_learned_so() -> None:
+    """An autopilot whose speed loop over ground runs on at 0 keeps way on against the current and stays where it
+    is (tests/support/kinematic_rudder.py); judged once REST_S of it has been seen after its way had time to go."""
+    settle = REST_SETTLE_LAGS * BoatLags(PRIOR_S, 1.0).stopping.lag_s
+    lags = BoatLags(PRIOR_S, 1.0)
+    feed_rest(lags, settle + REST_S - 0.3, -0.03, 0.0)
+    assert not lags.rest.holds  # not judged before REST_S of it has been seen
+    lags = BoatLags(PRIOR_S, 1.0)
+    feed_rest(lags, settle + REST_S + 0.2, -0.03, 0.0)
+    assert lags.rest.holds
+    feed_rest(lags, 30.0, -0.03, -0.03)  # learned for good: a drift later does not unlearn it
+    assert lags.rest.holds
+
+
+@pytest.mark.parametrize("carried", [1.0, 0.6, 0.3])
+def test_a_boat_the_current_carries_at_speed_0_is_never_taken_to_hold_its_ground(carried: float) -> None:
+    """Rover's stop controller puts the throttle off and the current carries the boat back (partly, on a hull that
+    coasts on or a current estimate too strong): however long it is watched."""
+    lags = BoatLags(PRIOR_S, 1.0)
+    feed_rest(lags, 60.0, -0.03, -carried * 0.03)
+    assert not lags.rest.holds
+
+
+@pytest.mark.parametrize(
+    ("current_along", "asked"),
+    [(-0.5 * REST_CURRENT_MPS, 0.0), (0.03, 0.0), (-0.03, 0.05), (-0.03, None)],
+)
+def test_no_evidence_of_holding_the_ground_without_a_current_against_the_bow_at_speed_0(
+    current_along: float, asked: float | None
+) -> None:
+    """Too little current along the heading to tell, a current from astern (a boat that goes ahead only cannot hold
+    against it), a speed asked, or no request (a wall): the boat that stays where it is shows nothing."""
+    lags = BoatLags(PRIOR_S, 1.0)
+    feed_rest(lags, 60.0, current_along, 0.0, asked)
+    assert not lags.rest.holds
+
+
+@pytest.mark.parametrize("holds_ground", [False, True])
+def test_speed_0_in_a_current_against_the_bow_tells_the_simulators_boat_from_one_that_holds_its_ground(
+    monkeypatch: pytest.MonkeyPatch, holds_ground: bool
+) -> None:
+    """Asked speed 0 at its heading (velocity + yaw) in 0.03 m/s against its bow after a run at 0.15 m/s: the
+    simulator's rudder boat (Rover's stop controller) drifts back, the kinematic boat without a stop controller
+    holds its ground; what the helm learns from each, fed every tick as it is in a mission."""
+    if holds_ground:
+        kinematic_rudder.install(monkeypatch)
+    boat, flow = make_boat("rudder", overrides=current(0.03, 180.0))  # toward S, the bow N
+    fly(boat, flow, 6.0, mask=VELOCITY_YAW, velocity=(0.15, 0.0), yaw=0.0)
+    run = fly(boat, flow, 20.0, mask=VELOCITY_YAW, velocity=(0.0, 0.0), yaw=0.0)
+    lags = BoatLags(PRIOR_S, 1.0)
+    every = round(TICK_S / (run[1, 0] - run[0, 0]))
+    for row in run[::every]:
+        h = np.array([math.cos(row[3]), math.sin(row[3])])
+        c_along = float(np.array([-0.03, 0.0]) @ h)
+        lags.update(float(row[0]), 0.0, c_along, float(row[4:6] @ h) - c_along)
+    drift = float(run[-1, 1] - run[every * 60, 1])  # N over the last 14 s [m]
+    assert (drift > -0.05) if holds_ground else (drift < -0.25)  # it stays, or goes with the current
+    assert lags.rest.holds is holds_ground

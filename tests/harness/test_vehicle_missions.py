@@ -189,6 +189,22 @@ def test_a_kinematic_rudder_boat_that_does_not_go_astern_arrives_and_keeps_stati
     assert_arrives_and_holds(cfg, result, f"kinematic rudder without astern, toward {toward}")
 
 
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize("start", [5, 1])
+def test_a_kinematic_rudder_boat_without_astern_that_holds_its_ground_at_speed_0_arrives_and_keeps_station(
+    zshape_model: Path, monkeypatch: pytest.MonkeyPatch, start: int
+) -> None:
+    """A rudder boat whose motor does not reverse and whose autopilot holds its ground at speed 0
+    (tests/support/kinematic_rudder.py, ``astern_mps`` 0, no stop controller), current toward N: the capture search's
+    model drifted it at speed 0 and sent 0 for 20 s while the boat held its ground and crept across the goal 47 deg
+    off its line (toward N 3 of 7 met the bounds: start 5 never arrived, start 1 held within 0.203 m). Now speed 0 is
+    seen to hold its ground and modelled so (estimation/speed_lag.py ``RestHold``, law/capture.py): toward N 20 of
+    21 over three flights (holds within 0.13-0.21 m; start 5 within 0.173-0.185 m, start 1 within 0.132-0.160 m)."""
+    kinematic_rudder.install(monkeypatch, astern_mps=0.0)
+    cfg, result = fly_from_demo_start(zshape_model, start, "N", f"rest{start}N", {"vehicle": "rudder"})
+    assert_arrives_and_holds(cfg, result, f"kinematic rudder without astern or stop controller, start {start}, N")
+
+
 def assert_arrives_and_holds(cfg: GuidanceConfig, result: mission.MissionResult, label: str) -> None:
     """Issue 10's bounds on the simulator's ground truth (see the module docstring)."""
     track = result.track

@@ -33,6 +33,13 @@ it, ``u1 - u0 = integral((target - u) dt) / T`` (over a window, not tick by tick
 filtered speed would otherwise bias the fit). The sums fade with ``RELAX_S`` (a boat that changed), and start from
 a prior worth ``PRIOR_WEIGHT`` (of (m/s s)^2), so a boat never seen is taken to respond as the simulator's boats do.
 
+Nor does every autopilot let the boat drift at speed 0 (:class:`RestHold`): Rover's stop controller puts the throttle
+off once the boat is slower than ATC_STOP_SPEED, and the current carries it; an autopilot whose speed loop over ground
+keeps running at 0 holds the boat's ground along its heading instead (the kinematic rudder boat of
+tests/support/kinematic_rudder.py). A search that took every boat to drift at 0 sent one that held its ground speed 0
+for 20 s, its model drifting the boat down onto its line while the boat crept across the goal 49 deg off it and
+missed its hold (stop 49).
+
 Conventions: speeds through the water along the heading [m/s] (negative astern), vehicle seconds.
 """
 
@@ -60,6 +67,15 @@ STERNWAY_MPS = 0.025  # the boat goes astern when its mean sternway over the tri
 STERNWAY_FRACTION = 0.25  # ... or this fraction of the mean sternway asked, if less: that hull gathers about half of
 # what it is asked over a trial (0.026 m/s asked 0.05, 0.062 m/s asked 0.12), and asked about 0.055 m/s astern by the
 # station keeper the skid-steer one was once taken for a boat that goes ahead only (stop 49's CI)
+REST_SETTLE_LAGS = 3.0  # a speed-0 request is watched from this many stopping lags after it began (the way it had
+# is gone by then: 5% of it) ...
+REST_CURRENT_MPS = 0.015  # ... while the current against the bow is at least this (ahead, holding the ground needs
+# way against it; a boat that goes ahead only cannot hold against a current from astern) [m/s]
+REST_S = 3.0  # ... and judged each time this much of it has been seen [s]
+REST_CARRY_FRACTION = 0.25  # carried back along its heading by less than this fraction of the current's component
+# along it, the boat holds its ground at rest (Rover's stop controller, stopped from 0.06-0.25 m/s in 0.03 m/s
+# against the bow or 30 deg off it: the simulator's rudder boat carried 0.63-1.0 of it in the first verdict, the
+# heavy hull with a weak astern 0.49-0.88, then 0.83-1.0; a boat that holds its ground, about 0)
 
 
 def follows(t_last: float | None, t: float) -> bool:
@@ -155,14 +171,52 @@ class SternwayTrial:
             )
 
 
+class RestHold:
+    """Whether speed 0 holds the boat's ground along its heading (:attr:`holds`) instead of letting the current carry
+    it: taken not to until shown. Speed-0 requests are watched from ``REST_SETTLE_LAGS`` stopping lags after each
+    began, while the current against the bow is at least ``REST_CURRENT_MPS``; each ``REST_S`` of that is a verdict:
+    the boat holds its ground if it was carried back along its heading by less than ``REST_CARRY_FRACTION`` of the
+    current's component along it (then kept for good; else watched again)."""
+
+    def __init__(self) -> None:
+        self.holds = False
+        self._since: float | None = None  # vehicle time the speed-0 request under way began [s]
+        self._t: float | None = None  # the last sample's time [s]
+        self._seen_s = 0.0  # watched time [s]
+        self._carried_m = 0.0  # ground lost along the heading over it (downstream) [m]
+        self._current_m = 0.0  # the current against the bow, integrated over it [m]
+
+    def update(self, t: float, stop: bool, current_along_mps: float, ground_along_mps: float, settle_s: float) -> None:
+        """One sample at vehicle time ``t``: whether speed 0 stands (``stop``), the current's component along the
+        heading and the ground velocity's [m/s], and how long after the request began the way it had is gone."""
+        if self.holds:
+            return
+        t_last, self._t = self._t, t
+        if not stop or not follows(t_last, t):
+            self._since = None
+            return
+        if self._since is None:
+            self._since = t
+        if t - self._since < settle_s or current_along_mps > -REST_CURRENT_MPS:
+            return
+        dt = t - t_last
+        self._seen_s += dt
+        self._carried_m -= ground_along_mps * dt
+        self._current_m -= current_along_mps * dt
+        if self._seen_s >= REST_S:
+            self.holds = self._carried_m < REST_CARRY_FRACTION * self._current_m
+            self._seen_s = self._carried_m = self._current_m = 0.0
+
+
 class BoatLags:
-    """One boat's three lags: :attr:`stopping` (speed 0 sent), :attr:`ahead` and :attr:`astern`; and whether it goes
-    astern at all (:attr:`sternway`)."""
+    """One boat's three lags: :attr:`stopping` (speed 0 sent), :attr:`ahead` and :attr:`astern`; whether it goes
+    astern at all (:attr:`sternway`); and whether speed 0 holds its ground (:attr:`rest`)."""
 
     def __init__(self, stop_prior_s: float, way_prior_s: float) -> None:
         self.stopping = SpeedLag(stop_prior_s)
         self.ahead, self.astern = SpeedLag(way_prior_s), SpeedLag(way_prior_s)
         self.sternway = SternwayTrial()
+        self.rest = RestHold()
 
     def update(
         self,
@@ -185,5 +239,7 @@ class BoatLags:
         self.sternway.update(t, target if steady else None, speed_water_mps)  # astern, however fast
         target = None if target is None or abs(target) > WAY_TARGET_MAX_MPS else target
         self.stopping.update(t, 0.0 if stop else None, speed_water_mps)
+        settle = REST_SETTLE_LAGS * self.stopping.lag_s
+        self.rest.update(t, stop, current_along_mps, speed_water_mps + current_along_mps, settle)
         self.ahead.update(t, target if target is not None and target > 0.0 else None, speed_water_mps)
         self.astern.update(t, target if target is not None and target < 0.0 else None, speed_water_mps)

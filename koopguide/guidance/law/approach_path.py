@@ -237,6 +237,12 @@ class ApproachPath:
             return np.zeros((0, 2))
         return np.array([s[:2] for s in self.samples]) + np.outer(self.times, self.current)
 
+    def reach_m(self, goal_ned: np.ndarray) -> float:
+        """How far from ``goal_ned`` [m] the plan takes the boat over ground, off it by ``REPLAN_M`` at most (0: no
+        plan)."""
+        ground = self.ground_ned
+        return float(np.max(np.hypot(*(ground - goal_ned).T))) + REPLAN_M if len(ground) else 0.0
+
     def may_plan(self, t: float) -> bool:
         """Whether to try planning at ``t``: not within ``RETRY_S`` of a plan that found nothing (planning costs
         milliseconds of the control loop)."""

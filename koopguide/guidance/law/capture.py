@@ -13,12 +13,13 @@ So within ``CAPTURE_M`` of the goal the boat's next ``HORIZON`` manoeuvres are c
 horizon, as in model-predictive control with motion primitives: Frazzoli, Dahleh & Feron (2005), "Maneuver-based
 motion planning for nonlinear systems with symmetries"): each manoeuvre lasts ``STEP_S``, ahead or astern at
 ``speed`` through the water with the rudder hard over either way or amidships, or drifting (speed 0, Rover's
-stop controller); every sequence is simulated on a kinematic model of the boat (a circle of radius R through the
-water, first-order speed lags ahead and astern, ``lags_s``) carried by the current estimate, and scored where it
-ends each manoeuvre by how far it is from holding (off the line, off the goal, the bow off the line, way left on)
-plus how far it strays out of the area the boat may use. The first manoeuvre of the best sequence is driven for its
-whole ``STEP_S`` (the boat needs that long to get way on; a search every tick dithers ahead-astern), then the
-search is made again from where the boat is. A boat already out of the area (pressed onto a tank's wall by the
+stop controller; a boat whose autopilot holds its ground at 0, ``holds_at_rest``, keeps its ground along its heading
+instead, as far as it goes astern); every sequence is simulated on a kinematic model of the boat (a circle of radius
+R through the water, first-order speed lags ahead and astern, ``lags_s``) carried by the current estimate, and scored
+where it ends each manoeuvre by how far it is from holding (off the line, off the goal, the bow off the line, way
+left on) plus how far it strays out of the area the boat may use. The first manoeuvre of the best sequence is driven
+for its whole ``STEP_S`` (the boat needs that long to get way on; a search every tick dithers ahead-astern), then
+the search is made again from where the boat is. A boat already out of the area (pressed onto a tank's wall by the
 current) scores every sequence by how far out it ends up, so it comes back in first.
 
 In sheared water (``point_only``, set by the helm) there is no line to capture: the still-water line the boat makes
@@ -100,6 +101,7 @@ class CaptureSearch:
         self.lags_s = (SPEED_LAG_S, SPEED_LAG_S)
         self.point_only = False  # no line to capture (sheared water): at rest at the goal, whatever the heading
         self.astern = True  # the boat goes astern (estimation/speed_lag.py SternwayTrial): if not, no manoeuvre astern
+        self.holds_at_rest = False  # speed 0 holds the boat's ground along its heading (speed_lag.py RestHold)
         seqs = np.array(list(itertools.product(range(len(MANEUVERS)), repeat=HORIZON)))  # (S, HORIZON)
         table = np.array(MANEUVERS, dtype=float)
         self._direction = table[seqs, 0]  # (S, HORIZON)
@@ -182,6 +184,12 @@ class CaptureSearch:
 
         ahead, astern = (max(SPEED_LAG_S, lag) for lag in self.lags_s)
 
+        def at_rest(psi):  # the way (S,) speed 0 asks through the water: none, or holding the ground along psi
+            if not self.holds_at_rest:
+                return np.zeros(n_seq)
+            hold = -(c[0] * np.cos(psi) + c[1] * np.sin(psi))
+            return hold if self.astern else np.maximum(hold, 0.0)
+
         def drive(pos, psi, u, target, rudder, seconds):  # the model over ``seconds``: Euler steps of SIM_DT_S
             lag = np.where(target > 0.0, ahead, np.where(target < 0.0, astern, SPEED_LAG_S))
             for _ in range(round(seconds / SIM_DT_S)):
@@ -212,7 +220,8 @@ class CaptureSearch:
             )
 
         for k in range(HORIZON):
-            pos, psi, u = drive(pos, psi, u, ways[:, k] * speed, rudders[:, k], STEP_S)
+            target = np.where(ways[:, k] == 0.0, at_rest(psi), ways[:, k] * speed)  # (a drift keeps its heading)
+            pos, psi, u = drive(pos, psi, u, target, rudders[:, k], STEP_S)
             if outside is not None:
                 strayed = np.maximum(strayed, np.asarray(outside(pos + goal_ned), dtype=float))
             score = np.minimum(score, pose_cost(pos, psi, u, k))  # the best pose along the sequence
@@ -221,7 +230,7 @@ class CaptureSearch:
         # got there, and drifted beside it for a minute: every turn toward the line scored worse than none)
         for direction in (1.0, -1.0) if self.astern else (1.0,):
             on = drive(pos, psi, u, np.full(n_seq, direction * speed), np.zeros(n_seq), CONTINUE_S)
-            on = drive(*on, np.zeros(n_seq), np.zeros(n_seq), STEP_S)
+            on = drive(*on, at_rest(on[1]), np.zeros(n_seq), STEP_S)
             score = np.minimum(score, pose_cost(*on, HORIZON + 1))
         total = score + AREA_COST_PER_M * strayed  # out of the area already: back in first
         return int(firsts[int(np.argmin(total))])

@@ -11,11 +11,10 @@ with the bow off the line it keeps way on (at least ``HOLD_WAY_MPS``) until the 
 
 Not every autopilot drifts at speed 0: one without Rover's stop controller holds the boat's ground at speed 0 (its
 speed loop over ground keeps way on against the current), and a boat that began its hold upstream of the goal then
-sat there, 0.2 m off, for good. So each drift is watched: a boat that, ``CARRY_CHECK_S`` after it last went
-upstream, has not come back by ``CARRY_FRACTION`` of what the current would have carried it holds its ground at
-rest (learned once, kept for the rest of the mission), and is then backed down instead of drifting: over ground
-downstream at the current's speed and ``BACK_MARGIN_MPS`` more, so the water passes its rudder from astern,
-the way the autopilot sets the rudder for a negative speed.
+sat there, 0.2 m off, for good. Such a boat (``holds_at_rest``, learned by the caller: estimation/speed_lag.py
+``RestHold``) is backed down instead of drifting: over ground downstream at the current's speed and
+``BACK_MARGIN_MPS`` more, so the water passes its rudder from astern, the way the autopilot sets the rudder for a
+negative speed.
 
 Conventions: distances [m] along the current's line, positive upstream; speeds over ground [m/s], unsigned (the
 caller signs them ahead or astern); heading errors [rad].
@@ -28,9 +27,6 @@ import math
 HOLD_WAY_MPS = 0.06  # righting the bow: at least this over ground into the current [m/s]
 HOLD_MAX_MPS = 0.1  # ... and never more than this [m/s]
 CREEP_M, CREEP_MPS = 0.12, 0.03  # creep this far upstream (about the goal), this fast at least
-CARRY_CHECK_S = 6.0  # a drift is judged this long after the boat last went upstream [s]
-CARRY_FRACTION = 0.1  # ... carried back by less than this fraction of the current's speed: it holds its ground
-CARRY_NOISE_M = 0.01  # going upstream means by more than this (the position estimate's noise) [m]
 BACK_MARGIN_MPS = 0.5 * CREEP_MPS  # backing down: this much faster than the current over ground [m/s]
 
 
@@ -44,12 +40,10 @@ class CreepCycle:
         self.righting = False  # the bow off the line: way on until it is back (hysteresis)
         self.creeping = False  # creeping upstream past the goal (else drifting back onto it)
         self.backing = False  # righting took the boat CREEP_M past the goal: drifting back onto it first
-        self.upstream_at: tuple[float, float] | None = None  # drifting: when and where (to_go) it last went upstream
-        self.holds_at_rest = False  # speed 0 holds the boat's ground: backed down instead (kept by reset)
+        self.holds_at_rest = False  # speed 0 holds the boat's ground: backed down instead (set by the caller)
 
     def reset(self) -> None:
         self.righting = self.creeping = self.backing = False
-        self.upstream_at = None
 
     def speed(
         self,
@@ -57,13 +51,12 @@ class CreepCycle:
         cross_m: float,
         error_rad: float,
         bias_mps: float = 0.0,
-        t: float | None = None,
         current_mps: float = 0.0,
     ) -> float:
         """The speed over ground into the current [m/s], 0 to drift, negative to back down (downstream):
         ``to_go_m`` how far the goal lies upstream, ``cross_m`` the offset across the line, ``error_rad`` how far
         the bow is off its LOS heading, ``bias_mps`` the station keeper's integral term along the way into the
-        current; ``t`` the vehicle time [s] (None: drifts are not watched), ``current_mps`` the current's speed."""
+        current; ``current_mps`` the current's speed."""
         # the bow off the line: way on until it is back within half the turn threshold (short bursts of way, the
         # boat drifting back between them, leave the bow where it was: the rudder's force grows with the
         # square of the water's speed past it)
@@ -82,23 +75,9 @@ class CreepCycle:
         if self.backing or not (self.creeping or self.righting):
             # drifting back: speed 0, the current carries the boat (not while the bow is off the line: drifting,
             # no water passes the rudder, and the bow would stay off)
-            self._watch_drift(to_go_m, t, current_mps)
             return -(current_mps + BACK_MARGIN_MPS) if self.holds_at_rest else 0.0
-        self.upstream_at = None
         s = self.gain * math.hypot(max(to_go_m, 0.0), cross_m) + bias_mps
         # slowing to the creep's end: coasting on from the offset's speed, boats ran 0.11-0.14 m past the goal
         s = min(s, CREEP_MPS + self.gain * max(to_go_m + 0.5 * CREEP_M, 0.0))
         s = max(s, HOLD_WAY_MPS if self.righting else CREEP_MPS)  # the current's flow past the rudder and more
         return min(HOLD_MAX_MPS, s)
-
-    def _watch_drift(self, to_go_m: float, t: float | None, current_mps: float) -> None:
-        """Learn whether speed 0 leaves the boat where it is (see the module's docstring)."""
-        if t is None or self.holds_at_rest:
-            return
-        if self.upstream_at is None or to_go_m < self.upstream_at[1] - CARRY_NOISE_M:
-            self.upstream_at = (t, to_go_m)  # (still) coasting upstream: the drift is judged from here
-            return
-        t0, to_go0 = self.upstream_at
-        if t - t0 >= CARRY_CHECK_S:
-            self.holds_at_rest = to_go_m - to_go0 < CARRY_FRACTION * current_mps * (t - t0)
-            self.upstream_at = (t, to_go_m)  # carried back: judged again over the next CARRY_CHECK_S
