@@ -259,7 +259,9 @@ def test_no_sternway_trial_while_the_boat_is_turned_toward_the_heading_asked() -
         assert lags.sternway.goes_astern is verdict
 
 
-def feed_rest(lags: BoatLags, seconds: float, current_along: float, ground_along: float, asked: float = 0.0) -> None:
+def feed_rest(
+    lags: BoatLags, seconds: float, current_along: float, ground_along: float, asked: float | None = 0.0
+) -> None:
     """Ask ``asked`` over ground along the heading every tick for ``seconds`` from rest, the boat moving over ground
     at ``ground_along`` along its heading, the current's component along it ``current_along``."""
     for k in range(round(seconds / TICK_S) + 1):
