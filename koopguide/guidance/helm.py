@@ -136,7 +136,7 @@ class Helm:
         c = 0.0 if current_ned is None else float(np.asarray(current_ned) @ unit(heading_rad))
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
         pivots = None if self.ability.needs_way else asked  # a boat that turns in place may be turning first
-        self.lags.update(t, None if at_edge else self.asked_mps, c, u, pivots)  # a wall stops a boat too
+        self.lags.update(t, None if at_edge else self.asked_mps, c, u, pivots, not self.sheared)  # a wall stops it too
         if at_edge or self.ability.moves_sideways:  # a boat that goes where it is sent turns as it will
             return
         self.ability.update(t, asked, u, turn_rate_radps, way_known=current_ned is not None)

@@ -176,7 +176,8 @@ class RestHold:
     it: taken not to until shown. Speed-0 requests are watched from ``REST_SETTLE_LAGS`` stopping lags after each
     began, while the current against the bow is at least ``REST_CURRENT_MPS``; each ``REST_S`` of that is a verdict:
     the boat holds its ground if it was carried back along its heading by less than ``REST_CARRY_FRACTION`` of the
-    current's component along it (then kept for good; else watched again)."""
+    current's component along it (then kept for good; else watched again). Not watched in sheared water, where the
+    estimate is no guide to the current at the boat (:meth:`BoatLags.update`)."""
 
     def __init__(self) -> None:
         self.holds = False
@@ -225,6 +226,7 @@ class BoatLags:
         current_along_mps: float,
         speed_water_mps: float,
         heading_error_rad: float | None = None,
+        current_trusted: bool = True,
     ) -> None:
         """One sample at vehicle time ``t`` of the way ``speed_water_mps`` [m/s] under the request that stands:
         ``asked_mps``, the speed over ground along the heading last sent (negative: astern; exactly 0: Rover's stop
@@ -232,7 +234,9 @@ class BoatLags:
         boat too), less ``current_along_mps``, the current's component along the heading, through the water;
         ``heading_error_rad``: how far the heading asked lies off the boat's, beyond ``TRIAL_HEADING_RAD`` no
         sternway trial (a skid-steer boat pivots first, Rover's WP_PIVOT_ANGLE; None: a boat that does not pivot,
-        such as a rudder boat, which goes astern, or not, whatever its heading)."""
+        such as a rudder boat, which goes astern, or not, whatever its heading); ``current_trusted``: the current
+        estimate is a guide to the water at the boat (not in sheared water, where the boat at rest may be carried by
+        less than the estimate says: then no evidence of speed 0 holding its ground, :class:`RestHold`)."""
         stop = asked_mps is not None and abs(asked_mps) <= 1e-9
         target = None if asked_mps is None or stop else asked_mps - current_along_mps
         steady = heading_error_rad is None or abs(heading_error_rad) <= TRIAL_HEADING_RAD
@@ -240,6 +244,6 @@ class BoatLags:
         target = None if target is None or abs(target) > WAY_TARGET_MAX_MPS else target
         self.stopping.update(t, 0.0 if stop else None, speed_water_mps)
         settle = REST_SETTLE_LAGS * self.stopping.lag_s
-        self.rest.update(t, stop, current_along_mps, speed_water_mps + current_along_mps, settle)
+        self.rest.update(t, stop and current_trusted, current_along_mps, speed_water_mps + current_along_mps, settle)
         self.ahead.update(t, target if target is not None and target > 0.0 else None, speed_water_mps)
         self.astern.update(t, target if target is not None and target < 0.0 else None, speed_water_mps)
