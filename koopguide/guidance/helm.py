@@ -24,6 +24,7 @@ import numpy as np
 from koopguide.guidance.estimation.speed_lag import BoatLags
 from koopguide.guidance.estimation.turning import TurnAbility
 from koopguide.guidance.law.approach_path import STOP_GAIN
+from koopguide.guidance.law.area import at_edge
 from koopguide.guidance.law.capture import SPEED_LAG_S
 from koopguide.guidance.law.command import (
     CRAB_MIN_SPEED_MPS,
@@ -46,7 +47,6 @@ LINE_LEAVE = 1.25  # ... and goes back to following the field only beyond this m
 SHEARED_WEIGHT = 0.5  # the current estimator's shear weight beyond which the water is sheared (estimation/current.py)
 # how the boat came on station, for the arrival's log line (:meth:`Helm.on_station`; "": the usual way)
 OFF_LINE_HOW = " (sheared water, off its line: its way would stop it within the arrival radius)"
-EDGE_INSET_M = 0.05  # a boat this close to the area's edge (a tank's wall, a bank) slips by it, not the current [m]
 
 
 class Helm:
@@ -87,13 +87,14 @@ class Helm:
         self.turn_probe = TurnProbe(self.cfg.command, self.law.outside_area)  # how it turns and stops, asked first
         self.planner.reset()
         self.line.reset()
+        self.line.capture.forget()  # the circle it was seen to turn on in the capture's manoeuvres
         self.asked_heading = None
 
     def probe(self, t: float, heading_rad: float | None, p_ned: np.ndarray | None = None) -> Command | None:
         """The turn probe's setpoint at the start of guiding (guidance/turn_probe.py), None once it is done."""
         command = self.turn_probe.command(t, heading_rad, p_ned, self.ability, self.ground_ned)
         if command is not None:
-            self.asked_heading = self.turn_probe.heading
+            self.asked_heading, self.doing = self.turn_probe.heading, self.turn_probe.doing
         return command
 
     def lookahead_m(self) -> float | None:
@@ -142,13 +143,12 @@ class Helm:
         self.ability.update(t, asked, u, turn_rate_radps, way_known=current_ned is not None)
 
     def at_edge(self, p_ned: np.ndarray) -> bool:
-        """Whether ``p_ned`` [m] lies within ``EDGE_INSET_M`` of the area's edge, or beyond it. A boat set onto a
-        tank's wall there (or a bank) slides along it: its slip is not the current's, and read as such it took the
-        estimate 0.1 m/s off, whose innovations on the next headings then read as sheared water (a rudder boat in
-        a uniform current then held a still-water line across it and never arrived: the default campaign's rudder
-        start 2 toward the east, stop 30)."""
-        steps = EDGE_INSET_M * np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
-        return float(np.max(self.law.outside_area(np.asarray(p_ned, dtype=float) + steps))) > 0.0
+        """Whether ``p_ned`` [m] lies within ``EDGE_INSET_M`` of the area's edge, or beyond it (law/area.py). A boat
+        set onto a tank's wall there (or a bank) slides along it: its slip is not the current's, and read as such it
+        took the estimate 0.1 m/s off, whose innovations on the next headings then read as sheared water (a rudder
+        boat in a uniform current then held a still-water line across it and never arrived: the default campaign's
+        rudder start 2 toward the east, stop 30)."""
+        return at_edge(self.law.outside_area, p_ned)
 
     def on_station(self, heading_rad: float | None, offset_ned: np.ndarray | None = None) -> bool:
         """Whether the boat can stay where it is, ``offset_ned`` [m] from the goal (boat - goal; None: not known here).
@@ -303,10 +303,9 @@ class Helm:
         within = sp.state is GuidanceState.ARRIVED and not self.on_station(heading_rad)
         if not within and (sp.state is not GuidanceState.GUIDING or sp.ground_ned is None):
             return np.asarray(sp.velocity_ned, dtype=float), None
-        probe = self.probe(self.t, heading_rad, p_ned) if self.t is not None else None
-        self.doing = "following the field" if probe is None else self.turn_probe.doing
-        if probe is not None:
+        if (probe := self.probe(self.t, heading_rad, p_ned) if self.t is not None else None) is not None:
             return probe
+        self.doing = "following the field"
         if within:
             # within the arrival radius, not yet holding its line (the supervisor has not arrived): still on the way; a
             # boat that turns in place turns onto the current's line as it keeps station
@@ -345,6 +344,7 @@ class Helm:
         self.line.aim(p_ned, self.law.goal_ned, heading_rad, c, drift, self.t if self.arrived else None)
         self.line.stop_s = self.lags.stopping.lag_s
         self.line.capture.lags_s = (self.lags.ahead.lag_s, self.lags.astern.lag_s)
+        self.line.capture.circle_speed_mps = self.ability.radius_speed_mps
         self.line.astern_able = self.lags.sternway.able
         self.line.cycle.holds_at_rest = self.line.capture.holds_at_rest = self.lags.rest.holds
         # in sheared water it arrives off its line at rest (stops_within): the capture search makes for that, and

@@ -16,9 +16,23 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from koopguide.guidance.law.capture import CAPTURE_M, ENTRY_CROSS_M, ENTRY_RAD, MANEUVERS, STEP_S, CaptureSearch
+from koopguide.guidance.law.capture import (
+    CAPTURE_M,
+    ENTRY_CROSS_M,
+    ENTRY_RAD,
+    MANEUVERS,
+    MAX_RADIUS_M,
+    MIN_RADIUS_M,
+    STEP_S,
+    CaptureSearch,
+)
 from koopguide.guidance.law.line_approach import FERRY_RAD
 from koopguide.guidance.law.maneuver import unit, wrap_pi
+from tests.support import kinematic_rudder
+from tests.support.open_water import fly as fly_boat
+from tests.support.open_water import make_boat
+
+VELOCITY_YAW = 2535  # type mask: velocity + yaw (heading and speed, docs/rover.md)
 
 ARRIVAL_M = 0.15  # the default arrival radius
 
@@ -370,3 +384,46 @@ def test_a_boat_that_holds_its_ground_at_speed_0_is_modelled_so_and_turned_onto_
     t, p, psi = track[-1]
     assert taken_on(t, p, psi), (t, p.round(3).tolist(), math.degrees(psi))
     assert fastest <= 0.3
+
+
+@pytest.mark.parametrize("kinematic", [False, True])
+def test_the_search_models_the_circle_it_sees_the_boat_turn_on_in_its_own_manoeuvres(
+    monkeypatch: pytest.MonkeyPatch, kinematic: bool
+) -> None:
+    """The simulator's rudder boat, 0.86 m at speed in a hard turn, turns on a far wider circle in a manoeuvre's 2 s
+    at 0.12 m/s from the way it had (its rudder force grows with the speed squared; its rudder and yaw take time to
+    come round): the search learns that circle from its own manoeuvres, not the one it was given. A kinematic boat
+    that turns on its 1.2 m circle at any speed is seen on that one. Both fly the search's commands (velocity + yaw)
+    beside a line through a goal 0.35 m to starboard, in still water."""
+    if kinematic:
+        kinematic_rudder.install(monkeypatch, radius_m=1.2)
+    boat, flow = make_boat("rudder")  # at the origin, bow north
+    search, goal, axis = CaptureSearch(max_speed_mps=0.3), np.array([0.0, 0.35]), 0.0
+    for _ in range(200):  # 20 s
+        truth = boat.truth()
+        h = unit(truth.psi)
+        water = float(np.array([truth.vn, truth.ve]) @ h)
+        m = search.command(boat.t, np.array([truth.n, truth.e]), goal, truth.psi, water, axis, None, 0.86, None)
+        v = m.speed_mps * unit(m.heading_rad)
+        fly_boat(boat, flow, 0.1, mask=VELOCITY_YAW, velocity=(float(v[0]), float(v[1])), yaw=m.heading_rad)
+    assert search.radius_seen_m is not None
+    if kinematic:
+        assert search.radius_seen_m == pytest.approx(1.2, abs=0.15)
+    else:
+        assert 1.25 <= search.radius_seen_m <= MAX_RADIUS_M  # 0.86 m was what it was given
+
+
+def test_before_a_circle_is_seen_the_search_widens_the_one_given_to_its_manoeuvres_speed() -> None:
+    """A circle measured at 0.24 m/s is a rudder boat's at speed: at a manoeuvre's 0.12 m/s the search's model turns
+    on one twice as wide (at low speed a rudder's circle widens in inverse proportion to the speed), never on a
+    tighter one than given, within its clamps; once its own manoeuvres show a circle, that one."""
+    search = CaptureSearch(max_speed_mps=0.3)
+    assert search.model_radius_m(1.2, 0.12) == pytest.approx(1.2)  # no speed known: as given
+    search.circle_speed_mps = 0.24
+    assert search.model_radius_m(1.2, 0.12) == pytest.approx(2.4)
+    assert search.model_radius_m(1.2, 0.3) == pytest.approx(1.2)  # faster than measured: as given
+    assert search.model_radius_m(2.0, 0.12) == MAX_RADIUS_M and search.model_radius_m(0.3, 0.24) == MIN_RADIUS_M
+    search.radius_seen_m = 1.7
+    assert search.model_radius_m(1.2, 0.12) == 1.7
+    search.forget()  # another boat
+    assert search.radius_seen_m is None and search.model_radius_m(1.2, 0.12) == pytest.approx(2.4)

@@ -237,6 +237,10 @@ def test_turn_ability_tells_a_pivoting_boat_from_one_that_needs_way() -> None:
     for k in range(60, 100):  # turning at 0.2 m/s at 8 deg/s: a circle of 1.43 m
         boat.update(0.05 * k, asked, 0.2, math.radians(8.0))
     assert boat.radius_m == pytest.approx(0.2 / math.radians(8.0), rel=0.2)
+    assert boat.radius_speed_mps == pytest.approx(0.2)  # the speed the circle was measured at
+    for k in range(100, 140):  # a wider circle at a lower speed keeps the tighter one and its speed
+        boat.update(0.05 * k, asked, 0.1, math.radians(2.0))
+    assert boat.radius_m == pytest.approx(0.2 / math.radians(8.0), rel=0.2) and boat.radius_speed_mps == 0.2
     reversing = TurnAbility()  # passing through zero speed while still turning is not a turn in place
     for k, u in enumerate(np.linspace(0.15, -0.15, 12)):
         reversing.update(0.05 * k, asked, float(u), math.radians(6.0))

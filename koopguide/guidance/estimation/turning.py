@@ -59,6 +59,7 @@ class TurnAbility:
         self.pivot_seen = False
         self.turn_rate = RATE_FLOOR  # [rad/s]
         self.radius_m: float | None = None  # turning radius at speed [m]; None before a turn at speed
+        self.radius_speed_mps: float | None = None  # ... the speed through the water it was measured at [m/s]
         self._stuck_since: float | None = None
         self._pivot_since: float | None = None
         self._asked_since: float | None = None  # vehicle time the hard turn under way was first asked [s]
@@ -101,4 +102,7 @@ class TurnAbility:
             # the tightest circle seen (transients, the rudder still going over, the turn rate still growing, all
             # read wider than the boat can turn), relaxing slowly
             relaxed = None if self.radius_m is None else self.radius_m * (1.0 + dt / RADIUS_RELAX_S)
-            self.radius_m = radius if relaxed is None else min(radius, relaxed)
+            if relaxed is None or radius < relaxed:
+                self.radius_m, self.radius_speed_mps = radius, u
+            else:
+                self.radius_m = relaxed

@@ -13,11 +13,14 @@ Conventions: points ``(K, 2)`` local NED [m]; the domain in model units, placed 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from koopguide.guidance.law.frames import ModelFrame
 
 Fence = tuple[tuple[float, float], tuple[float, float]] | None  # ((N_min, N_max), (E_min, E_max)) [m]
+EDGE_INSET_M = 0.05  # a boat this close to the area's edge (a tank's wall, a bank) may be set, stopped or turned [m]
 
 
 def outside_area(
@@ -34,3 +37,11 @@ def outside_area(
         fence_excess = np.maximum(f_lo - P, 0.0) + np.maximum(P - f_hi, 0.0)
         out = np.maximum(out, np.hypot(fence_excess[:, 0], fence_excess[:, 1]))
     return out
+
+
+def at_edge(outside: Callable[[np.ndarray], np.ndarray], p_ned: np.ndarray) -> bool:
+    """Whether ``p_ned`` ``(2,)`` [m] lies within ``EDGE_INSET_M`` of the area's edge, or beyond it (it, or a point
+    that far north, south, east or west of it, is outside). ``outside``: how far points ``(K, 2)`` lie outside the
+    area [m], e.g. :func:`outside_area` placed."""
+    steps = EDGE_INSET_M * np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+    return float(np.max(outside(np.asarray(p_ned, dtype=float) + steps))) > 0.0

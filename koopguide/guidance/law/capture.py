@@ -27,6 +27,16 @@ for there is not the current's at the goal, which turns it off that line, and su
 its way would stop it within the arrival radius (Helm.stops_within). There the search scores a pose by its distance
 from the goal and the way left on, as that arrival does, and once arrived keeps it so.
 
+The model's circle is the one the boat was seen to turn on in the search's own manoeuvres ahead with the rudder
+over (way made through the water over the heading turned, ``SEEN_WEIGHT`` of the way to each new one; not at the
+area's edge, where a wall turns a boat); until one is seen, the one measured in a hard turn at speed (``radius_m``,
+at ``circle_speed_mps``) widened to the manoeuvre's speed in inverse proportion, as a rudder boat's is at low speed
+(its rudder force grows with the speed squared, the linear yaw damping it works against does not). From the way it
+had, for ``STEP_S``, its rudder and yaw also take time to come round. The simulator's rudder boat, 0.86 m at
+0.17 m/s, turned 5.6-8.0 deg in a manoeuvre's first 2 s at 0.12 m/s and 9-10 deg in the next, where a 1.0 m model
+said 8-16 and 14; in the double gyre's current at the goal it went on past the goal, each search expecting a turn
+it did not make (docs/guidance.md, stop 51).
+
 Rover's command for a manoeuvre: heading ``TURN_RAD`` off the heading it began with (the rudder stays hard over
 for its whole length: the boat turns by at most speed x ``STEP_S`` / R, far less) or that heading itself, at
 the speed over ground along the heading that gives ``speed`` through the water (Rover holds the speed over
@@ -43,6 +53,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from koopguide.guidance.law.area import at_edge
 from koopguide.guidance.law.maneuver import Maneuver, capped, unit, wrap_pi
 
 CAPTURE_M = 0.5  # within this distance of the goal, a boat not yet holding its line is steered by this search [m]
@@ -56,6 +67,8 @@ TURN_RAD = math.radians(45.0)  # a turning manoeuvre asks for this much off its 
 SPEED_MPS = 0.12  # through the water on a manoeuvre (at least WATER_MARGIN_MPS faster than the current) [m/s]
 WATER_MARGIN_MPS = 0.04
 MIN_RADIUS_M, MAX_RADIUS_M = 1.0, 2.5  # the turning radius the model uses, clamped [m]
+SEEN_MIN_WAY_M = 0.1  # a manoeuvre ahead with the rudder over measures the circle once it made this much way [m]
+SEEN_WEIGHT = 0.5  # ... and moves the model's circle this fraction of the way to the one it measured
 ENTRY_CROSS_M = 0.1  # the hold takes a boat on this close to the line (across), from the search or not [m]
 ENTRY_RAD = math.radians(10.0)  # ... facing along it this well: from 20 deg off the hold keeps way on to right the
 # bow, which carried a boat handed over 20 deg off 0.5 m from the goal (uniform current)
@@ -102,6 +115,10 @@ class CaptureSearch:
         self.point_only = False  # no line to capture (sheared water): at rest at the goal, whatever the heading
         self.astern = True  # the boat goes astern (estimation/speed_lag.py SternwayTrial): if not, no manoeuvre astern
         self.holds_at_rest = False  # speed 0 holds the boat's ground along its heading (speed_lag.py RestHold)
+        self.radius_seen_m: float | None = None  # the circle seen in its manoeuvres (kept by reset: the boat's) [m]
+        self.circle_speed_mps: float | None = None  # the speed the circle it is given was measured at (the caller's)
+        self._way_m = 0.0  # way made through the water in the manoeuvre under way [m]
+        self._t: float | None = None  # the last command's vehicle time [s]
         seqs = np.array(list(itertools.product(range(len(MANEUVERS)), repeat=HORIZON)))  # (S, HORIZON)
         table = np.array(MANEUVERS, dtype=float)
         self._direction = table[seqs, 0]  # (S, HORIZON)
@@ -110,7 +127,12 @@ class CaptureSearch:
         self._ahead = np.flatnonzero(~(self._direction < 0.0).any(axis=1))  # the sequences with no leg astern
 
     def reset(self) -> None:
-        self.chosen, self.until = None, None
+        self.chosen, self.until, self._t = None, None, None
+
+    def forget(self) -> None:
+        """A restarted vehicle (maybe another boat): forget the circle seen."""
+        self.reset()
+        self.radius_seen_m = None
 
     @property
     def active(self) -> bool:
@@ -135,9 +157,14 @@ class CaptureSearch:
         line's bow direction (upstream in a current); ``current_ned``: the estimate, or None in still water;
         ``outside``: how far points ``(K, 2)`` lie outside the area the boat may use [m] (None: no limit)."""
         c = np.zeros(2) if current_ned is None else np.asarray(current_ned, dtype=float)
+        if self._t is not None:
+            self._way_m += abs(water_mps) * max(t - self._t, 0.0)
+        self._t = t
         if self.until is None or t >= self.until or self.chosen is None:
+            if self.until is not None and self.chosen is not None:  # the manoeuvre has run its STEP_S
+                self._see(p_ned, heading_rad, outside)
             self.chosen = MANEUVERS[self.best(p_ned, goal_ned, heading_rad, water_mps, axis_rad, c, radius_m, outside)]
-            self.heading0, self.until = heading_rad, t + STEP_S
+            self.heading0, self.until, self._way_m = heading_rad, t + STEP_S, 0.0
         direction, rudder = self.chosen
         heading = wrap_pi(self.heading0 + rudder * TURN_RAD)
         if direction == 0:
@@ -145,6 +172,29 @@ class CaptureSearch:
         speed = self.speed(c)
         over_ground = direction * speed + float(c @ unit(heading))  # Rover holds the speed over ground
         return Maneuver(heading, capped(over_ground, self.max_speed), direction < 0)
+
+    def _see(self, p_ned: np.ndarray, heading_rad: float, outside: Callable[[np.ndarray], np.ndarray] | None) -> None:
+        """The circle the manoeuvre that has just run turned the boat on, when it went ahead with the rudder over
+        and made ``SEEN_MIN_WAY_M`` of way, clear of the area's edge (``radius_seen_m``)."""
+        assert self.chosen is not None
+        direction, rudder = self.chosen
+        if direction <= 0 or rudder == 0 or self._way_m < SEEN_MIN_WAY_M:
+            return
+        if outside is not None and at_edge(outside, p_ned):
+            return
+        turned = rudder * wrap_pi(heading_rad - self.heading0)  # toward the rudder [rad]
+        radius = self._way_m / turned if turned > self._way_m / MAX_RADIUS_M else MAX_RADIUS_M
+        radius = min(MAX_RADIUS_M, max(MIN_RADIUS_M, radius))
+        seen = self.radius_seen_m
+        self.radius_seen_m = radius if seen is None else seen + SEEN_WEIGHT * (radius - seen)
+
+    def model_radius_m(self, radius_m: float, speed_mps: float) -> float:
+        """The model's circle [m] at a manoeuvre's ``speed_mps`` [m/s]: the one seen, else ``radius_m`` (measured at
+        ``circle_speed_mps``) widened in inverse proportion to the speed as a rudder boat's is, within the clamps."""
+        if self.radius_seen_m is not None:
+            return self.radius_seen_m
+        given = radius_m * max(1.0, (self.circle_speed_mps or speed_mps) / speed_mps)
+        return min(MAX_RADIUS_M, max(MIN_RADIUS_M, given))
 
     @staticmethod
     def speed(c: np.ndarray) -> float:
@@ -167,8 +217,8 @@ class CaptureSearch:
         rows = slice(None) if self.astern else self._ahead  # a boat that goes ahead only: no sequence astern
         ways, rudders, firsts = self._direction[rows], self._rudder[rows], self._first[rows]
         n_seq = len(firsts)
-        radius = min(MAX_RADIUS_M, max(MIN_RADIUS_M, radius_m))
         speed = self.speed(c)
+        radius = self.model_radius_m(radius_m, speed)
         p0 = np.asarray(p_ned, dtype=float)
         pos = np.tile(p0 - np.asarray(goal_ned, dtype=float), (n_seq, 1))  # (S, 2) from the goal [m]
         psi = np.full(n_seq, heading_rad)
