@@ -28,11 +28,10 @@ from koopguide.guidance.law.capture import (
 )
 from koopguide.guidance.law.line_approach import FERRY_RAD
 from koopguide.guidance.law.maneuver import unit, wrap_pi
+from koopguide.mavlink.rover import MASK_VELOCITY_YAW
 from tests.support import kinematic_rudder
 from tests.support.open_water import fly as fly_boat
 from tests.support.open_water import make_boat
-
-VELOCITY_YAW = 2535  # type mask: velocity + yaw (heading and speed, docs/rover.md)
 
 ARRIVAL_M = 0.15  # the default arrival radius
 
@@ -404,8 +403,8 @@ def test_the_search_models_the_circle_it_sees_the_boat_turn_on_in_its_own_manoeu
         h = unit(truth.psi)
         water = float(np.array([truth.vn, truth.ve]) @ h)
         m = search.command(boat.t, np.array([truth.n, truth.e]), goal, truth.psi, water, axis, None, 0.86, None)
-        v = m.speed_mps * unit(m.heading_rad)
-        fly_boat(boat, flow, 0.1, mask=VELOCITY_YAW, velocity=(float(v[0]), float(v[1])), yaw=m.heading_rad)
+        v = m.velocity_ned
+        fly_boat(boat, flow, 0.1, mask=MASK_VELOCITY_YAW, velocity=(float(v[0]), float(v[1])), yaw=m.heading_rad)
     assert search.radius_seen_m is not None
     if kinematic:
         assert search.radius_seen_m == pytest.approx(1.2, abs=0.15)
