@@ -187,6 +187,28 @@ def test_arrives_then_drifts_off_reacquires_and_the_state_is_never_arrived_beyon
     assert [s for _, s in bench.sup.transitions][-3:] == ["arrived", "guiding", "arrived"]
 
 
+def test_arrived_is_claimed_only_while_the_boat_stays_within_the_radius_until_the_service_would_notice_fixes_stop(
+    bench: Bench,
+) -> None:
+    """A status stands until the next one, and a stalled service (a busy computer) sends none for a while; it would
+    notice fixes stopping after ``failsafe.stale_after_s``. So ``arrived`` is claimed only while the boat, drifting as
+    it is, stays within the reacquire radius that long (a service stalled 0.55 s, the boat drifting out at 0.08 m/s,
+    read arrived at 0.256 m: the campaign's rudder double gyre, seed 13)."""
+    bench.p = np.array([0.4, 0.1])
+    assert bench.fly(40.0)[-1].state is S.ARRIVED
+    reacquire, stale_s = bench.cfg.arrival.reacquire_radius_m, bench.cfg.failsafe.stale_after_s
+    v = np.array([0.0, 0.08])
+    for _ in range(400):
+        bench.p = bench.p + v * DT
+        bench.advance()
+        bench.fix(v=v)
+        if bench.sup.state is not S.ARRIVED:
+            break
+        assert math.hypot(*(bench.p + v * stale_s)) <= reacquire, bench.p  # had it stalled now: still within
+    assert bench.sup.state is S.GUIDING and bench.sup.reason.startswith("drifted")
+    assert math.hypot(*bench.p) < reacquire  # it left with the boat still inside
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_the_state_leaves_arrived_once_the_boat_may_be_beyond_the_radius_given_the_estimates_spread(
     bench: Bench, seed: int
