@@ -4,14 +4,13 @@
       -> InputGate / TeleportGuard -> KalmanTracker, CurrentEstimator -> GuidanceLaw / StationKeeper
       -> Decision (setpoint, state, reason, degraded, requests: set mode, arm, message intervals)
 
-States (docs/guidance.md): waiting (no heartbeat, no position, not in GUIDED, disarmed) -> guiding -> arrived;
-hold (stale position, teleporting positions, outside the domain or geofence); fault (the field failed, or setpoints
-stopped going out). ``arrived`` is left for ``guiding`` when the boat drifts beyond ``arrival.reacquire_radius_m``;
+States (docs/guidance.md): waiting (no heartbeat, no position, not in GUIDED, disarmed) -> guiding -> arrived; hold
+(stale position, teleporting positions, outside the domain or geofence); fault (the field failed, or setpoints stopped
+going out). ``arrived`` is left for ``guiding`` when the boat may drift beyond ``arrival.reacquire_radius_m``;
 ``degraded`` marks guiding by direct pursuit of the goal after the progress watchdog saw no progress along the field
-for ``failsafe.stall_s``. Every decision has a reason.
-
-Time is passed in: ``t_s`` the vehicle's clock [s], ``wall_s`` the service's monotonic clock [s] (heartbeat
-timeouts, request retries, log rate). Conventions: local NED [m], [m/s]; headings [rad] from north.
+for ``failsafe.stall_s``. Every decision has a reason. Time is passed in: ``t_s`` the vehicle's clock [s], ``wall_s``
+the service's monotonic clock [s] (heartbeat timeouts, request retries, log rate). Conventions: local NED [m], [m/s];
+headings [rad] from north.
 """
 
 from __future__ import annotations
@@ -25,6 +24,7 @@ from koopguide.guidance import events as ev
 from koopguide.guidance.estimation.progress import ProgressWatchdog
 from koopguide.guidance.helm import Helm
 from koopguide.guidance.law.command import GuidanceLaw, GuidanceState, along_current
+from koopguide.guidance.law.maneuver import within_speed
 from koopguide.guidance.law.station import StationKeeper
 from koopguide.guidance.neighbours import Neighbours
 from koopguide.guidance.requests import RequestSchedule
@@ -32,10 +32,7 @@ from koopguide.guidance.settings import ArrivalAction, GuidanceConfig
 from koopguide.guidance.vehicle_state import VehicleState
 from koopguide.mavlink import rover
 
-HONEST_LEAD_S = 0.25  # leave arrived on where the boat will be this much later [s] (the fix's age, and more), or
-# failsafe.stale_after_s later if longer: a status must hold until the service would notice fixes stopping (a
-# service stalled 0.55 s with the boat drifting out at 0.08 m/s read arrived at 0.256 m, the campaign's rudder
-# double gyre, seed 13)
+HONEST_LEAD_S = 0.25  # leave arrived on where the boat will be this long after a fix [s], or stale_after_s if longer
 HONEST_SIGMAS = 2.0  # ... and when it may be beyond the reacquire radius by this many of the estimate's spreads
 OUTPUT_GAP_PERIODS = 2.0  # no setpoint for this many command periods while guiding/arrived: fault
 ZERO = (0.0, 0.0)
@@ -127,8 +124,7 @@ class Supervisor:
             return False
         self._place_geodetic_goal()
         if self.arrived:  # status honesty: leave arrived on the fix that shows the drift, not a tick later
-            lead = max(HONEST_LEAD_S, self.cfg.failsafe.stale_after_s)  # a fix is already old when it arrives
-            ahead = self.vehicle.tracker.predict(fix.t_s + lead)[0]
+            ahead = self.vehicle.tracker.predict(fix.t_s + max(HONEST_LEAD_S, self.cfg.failsafe.stale_after_s))[0]
             self.reacquire_if_drifted(self.law.distance_to_goal(ahead), fix.t_s)
         return True
 
@@ -357,7 +353,7 @@ class Supervisor:
         if send and state in (S.GUIDING, S.ARRIVED) and self.cfg.fleet.enabled and self.neighbours.latest:
             v, reason, yaw = self._keep_separation(v, reason, t, yaw)
         self._set_state(state, reason, t)
-        velocity = (float(v[0]), float(v[1])) if send else None
+        velocity = within_speed(v, self.cfg.command.max_speed_mps) if send else None  # never over, even by an ulp
         guided = yaw if state in (S.GUIDING, S.ARRIVED) else None
         yaw = None if velocity is None else self.helm.yaw_for(velocity, guided, self.vehicle.heading_rad)
         self.helm.sent(velocity, yaw)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import enum
 import math
+import struct
 from collections.abc import Sequence
 
 from koopguide.mavlink.wire import mavlink
@@ -94,6 +95,14 @@ def message_interval(target: Target, message_id: int, rate_hz: float) -> mavlink
     return command_long(target, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, message_id, 1e6 / rate_hz)
 
 
+def float32_toward_zero(x: float) -> float:
+    """``x`` as a float32 (how MAVLink carries it), rounded toward zero instead of to nearest: never larger."""
+    y = struct.unpack("<f", struct.pack("<f", abs(x)))[0]
+    if y > abs(x):  # one float32 step down
+        y = struct.unpack("<f", struct.pack("<I", struct.unpack("<I", struct.pack("<f", y))[0] - 1))[0]
+    return math.copysign(y, x)
+
+
 def velocity_setpoint(
     target: Target, time_boot_ms: int, velocity_ned: Sequence[float], yaw_rad: float | None
 ) -> mavlink.MAVLink_message:
@@ -109,7 +118,7 @@ def velocity_setpoint(
     if yaw_rad is not None:
         along = vn * math.cos(yaw_rad) + ve * math.sin(yaw_rad)
         if (vn < 0.0) != (along < 0.0) and math.hypot(vn, ve) > 0.0:
-            vn, ve = math.copysign(math.hypot(vn, ve), along), 0.0
+            vn, ve = math.copysign(float32_toward_zero(math.hypot(vn, ve)), along), 0.0  # no faster on the wire
     return mavlink.MAVLink_set_position_target_local_ned_message(
         time_boot_ms & 0xFFFFFFFF, target[0], target[1], mavlink.MAV_FRAME_LOCAL_NED, mask,
         0.0, 0.0, 0.0, vn, ve, 0.0, 0.0, 0.0, 0.0, 0.0 if yaw_rad is None else float(yaw_rad), 0.0,

@@ -31,9 +31,10 @@ from koopguide.guidance.law.maneuver import (
     MIN_SPEED_MPS,
     Maneuver,
     ManeuverPlanner,
+    within_speed,
     wrap_pi,
 )
-from koopguide.mavlink.rover import MASK_VELOCITY_YAW, velocity_setpoint
+from koopguide.mavlink.rover import MASK_VELOCITY_YAW, float32_toward_zero, velocity_setpoint
 
 angles = st.floats(-math.pi, math.pi, allow_nan=False)
 speeds = st.floats(0.01, 0.3, allow_nan=False)
@@ -276,6 +277,47 @@ def test_a_setpoint_with_yaw_is_read_by_rover_as_astern_exactly_when_it_points_b
         assert (msg.vx < 0) == (along < 0)  # Rover: a negative vx with yaw means astern
     if (vn < 0) == (along < 0):  # where both readings agree, the true NED vector goes (a velocity follower's)
         assert (msg.vx, msg.vy) == (pytest.approx(vn, abs=1e-6), pytest.approx(ve, abs=1e-6))
+
+
+def wire(x: float) -> float:
+    """``x`` as MAVLink carries it (float32, rounded to nearest)."""
+    return float(np.float32(x))
+
+
+@settings(max_examples=500, deadline=None)
+@given(
+    heading=angles,
+    ratio=st.one_of(st.just(1.0), st.floats(0.0, 3.0)),
+    top=st.one_of(st.just(0.3), st.floats(0.01, 5.0)),
+    yaw=st.one_of(st.none(), angles),
+)
+def test_no_setpoint_is_over_max_speed_even_by_a_rounding_neither_computed_nor_on_the_wire(
+    heading: float, ratio: float, top: float, yaw: float | None
+) -> None:
+    """A velocity along any heading at up to 3 x max_speed (exactly max_speed half the time: 0.3 m/s along 167 of
+    3600 headings is 0.30000000000000004 long), shortened by ``within_speed``: never longer than max_speed, as
+    computed nor as sent (MAVLink's float32, with or without the yaw that turns it into +-|v| north), the same
+    direction, and no shorter than asked beyond a float32 rounding."""
+    v = ratio * top * unit(heading)
+    vn, ve = within_speed(v, top)
+    assert math.hypot(vn, ve) <= top
+    assert math.hypot(wire(vn), wire(ve)) <= top
+    msg = velocity_setpoint((1, 1), 0, (vn, ve), yaw)
+    assert math.hypot(wire(msg.vx), wire(msg.vy)) <= top
+    asked = min(float(np.hypot(*v)), top)
+    assert math.hypot(vn, ve) == pytest.approx(asked, rel=1e-6, abs=1e-12)
+    assert abs(vn * v[1] - ve * v[0]) <= 1e-6 * top * top  # along the velocity asked
+
+
+def test_float32_toward_zero_is_a_float32_never_larger_than_asked() -> None:
+    for x in (0.3, -0.3, 0.1, 1.0, 0.0, -1e-9, 123.456):
+        y = float32_toward_zero(x)
+        assert (
+            wire(y) == y
+            and abs(y) <= abs(x)
+            and abs(x) - abs(y) <= 1.2e-7 * abs(x)
+            and math.copysign(1, y) == math.copysign(1, x)
+        )
 
 
 def test_ahead_goes_as_velocity_only_and_astern_or_a_hold_with_the_yaw() -> None:

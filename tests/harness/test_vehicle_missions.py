@@ -212,7 +212,7 @@ def assert_arrives_and_holds(cfg: GuidanceConfig, result: mission.MissionResult,
     assert result.arrived, f"{label}: closest {distance.min():.3f} m, final {distance[-1]:.3f} m"
     assert result.arrival_time_s <= ARRIVE_S, result.arrival_time_s
     assert distance.min() <= ARRIVE_M + ESTIMATE_SLACK_M  # the true boat, not only the estimate
-    assert result.max_setpoint_mps <= cfg.command.max_speed_mps + 1e-9, result.max_setpoint_mps
+    assert result.max_setpoint_mps <= cfg.command.max_speed_mps, result.max_setpoint_mps  # not even by an ulp
     after = track[:, 0] >= result.arrived_at_s
     assert track[after, 0][-1] - result.arrived_at_s >= HOLD_S - 1.0  # the hold was watched for the whole 60 s
     assert distance[after].max() <= HOLD_M, f"hold error {distance[after].max():.3f} m"
@@ -248,7 +248,7 @@ def test_a_skid_steer_boat_starting_close_to_the_goal_and_facing_away_backs_onto
     assert result.arrived and result.arrival_time_s <= 30.0, result.arrival_time_s  # no orbit: ~10 s
     after = result.track[:, 0] >= result.arrived_at_s
     assert distance[after].max() <= HOLD_M, f"hold error {distance[after].max():.3f} m"
-    assert result.max_setpoint_mps <= cfg.command.max_speed_mps + 1e-9
+    assert result.max_setpoint_mps <= cfg.command.max_speed_mps
 
 
 @pytest.mark.timeout(180)

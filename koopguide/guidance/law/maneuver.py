@@ -48,6 +48,7 @@ import numpy as np
 
 from koopguide.guidance.estimation.turning import TurnAbility
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, CURRENT_MIN_MPS
+from koopguide.mavlink.rover import float32_toward_zero
 
 ASTERN_RAD = math.radians(120.0)  # switch ahead <-> astern when the current direction needs a larger turn
 HOLDING_ASTERN_RAD = math.radians(100.0)  # ... keeping station in a current: the nearer end of its line, past 90 deg
@@ -81,6 +82,23 @@ def unit(angle_rad: float) -> np.ndarray:
 def capped(speed_mps: float, max_speed_mps: float) -> float:
     """A signed speed (negative: astern) [m/s] with its size capped at ``max_speed_mps``."""
     return min(max_speed_mps, max(-max_speed_mps, speed_mps))
+
+
+def within_speed(v_ned: tuple[float, float] | np.ndarray, max_speed_mps: float) -> tuple[float, float]:
+    """The setpoint ``v_ned`` (2,) [m/s] shortened, where need be, so that its norm is at most ``max_speed_mps`` as
+    computed and as sent (MAVLink's float32): a heading's cos and sin times the top speed come out one ulp over in
+    167 of 3600 headings (0.3 m/s: 0.30000000000000004), and 0.3 as a float32 is 0.3000000119."""
+    vn, ve = float(v_ned[0]), float(v_ned[1])
+    norm = math.hypot(vn, ve)
+    if norm > max_speed_mps:
+        vn, ve = vn * (max_speed_mps / norm), ve * (max_speed_mps / norm)
+    wire = math.hypot(float(np.float32(vn)), float(np.float32(ve)))  # as sent (rounded to nearest)
+    if math.hypot(vn, ve) <= max_speed_mps and wire <= max_speed_mps:
+        return vn, ve
+    vn, ve = float32_toward_zero(vn), float32_toward_zero(ve)  # float32 values: sent as they are
+    while math.hypot(vn, ve) > max_speed_mps:  # (a component float32 already)
+        vn, ve = float32_toward_zero(vn * (1.0 - 2.0**-23)), float32_toward_zero(ve * (1.0 - 2.0**-23))
+    return vn, ve
 
 
 def water_current(current_ned: np.ndarray | None) -> np.ndarray:
