@@ -47,6 +47,7 @@ LINE_LEAVE = 1.25  # ... and goes back to following the field only beyond this m
 SHEARED_WEIGHT = 0.5  # the current estimator's shear weight beyond which the water is sheared (estimation/current.py)
 # how the boat came on station, for the arrival's log line (:meth:`Helm.on_station`; "": the usual way)
 OFF_LINE_HOW = " (sheared water, off its line: its way would stop it within the arrival radius)"
+OFF_EDGE_S = 4.0  # at the area's edge, the current carries the boat clear of it within this long: no wall holds it
 
 
 class Helm:
@@ -117,12 +118,14 @@ class Helm:
         current_std_mps: float = 0.0,
         shear_weight: float = 0.0,
         at_edge: bool = False,
+        off_edge: bool = False,
     ) -> None:
         """The boat's heading, turn rate, ground velocity and the estimated current (and its spread, and how much
         shear its estimator sees: ``CurrentEstimator.shear_weight``) at vehicle time ``t``. ``at_edge``: the boat
         is at the area's edge (:meth:`at_edge`), where a wall may turn or stop it: how it turns and stops is not
         learned there (a rudder boat of a 2.4 m circle set onto a tank's wall turned on it as if on a 0.8 m one,
-        and the approach planned on that circle backed and filled by the wall for a minute, stop 35)."""
+        and the approach planned on that circle backed and filled by the wall for a minute, stop 35). ``off_edge``: the
+        current carries it clear of the edge (:meth:`edge_state`), so a wall cannot be what holds it at speed 0."""
         self.t, self.current_ned, self.current_std = t, current_ned, current_std_mps
         self.shearing = shear_weight > SHEARED_WEIGHT  # the estimator sees shear now
         self.sheared = self.sheared or self.shearing
@@ -137,7 +140,8 @@ class Helm:
         c = 0.0 if current_ned is None else float(np.asarray(current_ned) @ unit(heading_rad))
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
         pivots = None if self.ability.needs_way else asked  # a boat that turns in place may be turning first
-        self.lags.update(t, None if at_edge else self.asked_mps, c, u, pivots, not self.sheared)  # a wall stops it too
+        at_rest = off_edge and self.asked_mps == 0.0  # a wall stops a boat too, but cannot hold it off the current
+        self.lags.update(t, None if at_edge and not at_rest else self.asked_mps, c, u, pivots, not self.sheared)
         if at_edge or self.ability.moves_sideways:  # a boat that goes where it is sent turns as it will
             return
         self.ability.update(t, asked, u, turn_rate_radps, way_known=current_ned is not None)
@@ -149,6 +153,13 @@ class Helm:
         boat in a uniform current then held a still-water line across it and never arrived: the default campaign's
         rudder start 2 toward the east, stop 30)."""
         return at_edge(self.law.outside_area, p_ned)
+
+    def edge_state(self, p_ned: np.ndarray, current_ned: np.ndarray | None) -> tuple[bool, bool]:
+        """(at the area's edge, :meth:`at_edge`; and carried clear of it by ``current_ned`` within ``OFF_EDGE_S``). A
+        kinematic rudder boat that holds its ground at speed 0, held on its line 0.6 m upstream of the goal just beyond
+        the area's edge, learned nothing there of how speed 0 holds it, and was sent 0 for 40 s (the CI's toward N)."""
+        edge = self.at_edge(p_ned)
+        return edge, edge and current_ned is not None and not self.at_edge(p_ned + OFF_EDGE_S * np.asarray(current_ned))
 
     def on_station(self, heading_rad: float | None, offset_ned: np.ndarray | None = None) -> bool:
         """Whether the boat can stay where it is, ``offset_ned`` [m] from the goal (boat - goal; None: not known here).

@@ -239,9 +239,9 @@ class Supervisor:
         sideways = self.helm.ability.moves_sideways  # its heading tells nothing of how it moves (update_current)
         current = estimator.current_ned if (heading is not None or sideways) and estimator.updates else None
         rate = self.vehicle.attitude[2] if heading is not None and self.vehicle.attitude else None
-        edge = self.helm.at_edge(p)
+        edge = self.helm.edge_state(p, current)  # (at the area's edge, carried off it)
         astern, holds = self.helm.lags.sternway.able, self.helm.lags.rest.holds
-        self.helm.observe(now, heading, rate, v_est, current, estimator.seen_std_mps, estimator.shear_weight, edge)
+        self.helm.observe(now, heading, rate, v_est, current, estimator.seen_std_mps, estimator.shear_weight, *edge)
         if astern and not self.helm.lags.sternway.able:  # estimation/speed_lag.py SternwayTrial
             self._note(logging.WARNING, "the boat gathered no sternway when asked astern: guiding it ahead only")
         if self.helm.lags.rest.holds and not holds:  # estimation/speed_lag.py RestHold

@@ -617,6 +617,35 @@ def test_a_neighbour_heard_longer_ago_than_the_timeout_is_forgotten(zshape_model
     assert bench.sup.neighbours.latest == {}
 
 
+def test_at_the_areas_edge_a_boat_the_current_carries_off_it_is_still_seen_to_hold_its_ground_at_speed_0(
+    zshape_model: Path,
+) -> None:
+    """A wall stops a boat, so what a boat does at the area's edge says nothing of how it stops (``at_edge``: no
+    evidence). But no wall holds a boat the current carries off the edge: a kinematic rudder boat that holds its ground
+    at speed 0, held on its line 0.6 m upstream of the goal just beyond the area's south edge, learned nothing there
+    and was sent 0 for 40 s (the CI's flight toward N failed 10 of 10 times). There, speed 0 holding its ground is
+    learned (estimation/speed_lag.py ``RestHold``); with the current into the edge it is not."""
+    probe = Bench(zshape_model).sup
+    inside_n, outside_n = 1.0, -2.0  # the area's south edge (domain plus turning room) lies between, at E = 0
+    for _ in range(40):
+        mid = 0.5 * (inside_n + outside_n)
+        inside = probe.law.outside_area(np.array([mid, 0.0])) == 0.0
+        inside_n, outside_n = (mid, outside_n) if inside else (inside_n, mid)
+    beyond = np.array([inside_n - 0.03, 0.0])  # where the boat sat
+    north, south = np.array([0.03, 0.0]), np.array([-0.03, 0.0])
+    assert probe.helm.edge_state(beyond, north) == (True, True)  # carried off the edge: no wall holds it
+    assert probe.helm.edge_state(beyond, south) == (True, False)  # pressed on it
+    assert probe.helm.edge_state(beyond, None) == (True, False)
+    assert probe.helm.edge_state(np.array([inside_n + 0.5, 0.0]), north) == (False, False)
+    for current, learned in ((north, True), (south, False)):
+        helm = Bench(zshape_model).sup.helm
+        heading = 0.0 if current[0] < 0 else math.pi  # bow upstream
+        for k in range(400):  # 20 s asked speed 0 (heading held), holding its ground
+            helm.sent((0.0, 0.0), heading)
+            helm.observe(k * DT, heading, 0.0, np.zeros(2), current, 0.001, 0.0, *helm.edge_state(beyond, current))
+        assert helm.lags.rest.holds is learned, current
+
+
 def test_slip_at_the_areas_edge_is_not_read_as_current(zshape_model: Path) -> None:
     """A boat set onto a tank's wall at the area's east edge slides north along it, bow to the north-east: its
     slip across the bow is the wall's doing, not a current's, and stays out of the estimate (stop 30: read as
