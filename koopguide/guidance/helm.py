@@ -24,7 +24,7 @@ import numpy as np
 from koopguide.guidance.estimation.speed_lag import BoatLags
 from koopguide.guidance.estimation.turning import TurnAbility
 from koopguide.guidance.law.approach_path import STOP_GAIN
-from koopguide.guidance.law.area import at_edge
+from koopguide.guidance.law.area import at_edge, off_edge
 from koopguide.guidance.law.capture import SPEED_LAG_S
 from koopguide.guidance.law.command import (
     CRAB_MIN_SPEED_MPS,
@@ -47,7 +47,6 @@ LINE_LEAVE = 1.25  # ... and goes back to following the field only beyond this m
 SHEARED_WEIGHT = 0.5  # the current estimator's shear weight beyond which the water is sheared (estimation/current.py)
 # how the boat came on station, for the arrival's log line (:meth:`Helm.on_station`; "": the usual way)
 OFF_LINE_HOW = " (sheared water, off its line: its way would stop it within the arrival radius)"
-OFF_EDGE_S = 4.0  # at the area's edge, the current carries the boat clear of it within this long: no wall holds it
 
 
 class Helm:
@@ -99,14 +98,12 @@ class Helm:
         return command
 
     def lookahead_m(self) -> float | None:
-        """The pursuit look-ahead for this boat: for a boat that needs way, at least twice its turning radius
-        (pure pursuit asks for the curvature 2 sin(alpha) / L, so L >= 2 R never asks for a circle tighter
-        than R: Coulter (1992), "Implementation of the pure pursuit path tracking algorithm"); None: as
-        configured."""
+        """The pursuit look-ahead for this boat: for a boat that needs way, at least twice its turning radius (pure
+        pursuit asks for the curvature 2 sin(alpha) / L, so L >= 2 R never asks for a circle tighter than R: Coulter
+        (1992), "Implementation of the pure pursuit path tracking algorithm"); None: as configured."""
         radius = self.ability.radius_m
-        if not self.ability.needs_way or radius is None or self.in_company:
-            return None
-        return max(self.cfg.command.lookahead_m, 2.0 * radius)
+        needs = self.ability.needs_way and radius is not None and not self.in_company
+        return max(self.cfg.command.lookahead_m, 2.0 * radius) if needs else None
 
     def observe(
         self,
@@ -124,8 +121,8 @@ class Helm:
         shear its estimator sees: ``CurrentEstimator.shear_weight``) at vehicle time ``t``. ``at_edge``: the boat
         is at the area's edge (:meth:`at_edge`), where a wall may turn or stop it: how it turns and stops is not
         learned there (a rudder boat of a 2.4 m circle set onto a tank's wall turned on it as if on a 0.8 m one,
-        and the approach planned on that circle backed and filled by the wall for a minute, stop 35). ``off_edge``: the
-        current carries it clear of the edge (:meth:`edge_state`), so a wall cannot be what holds it at speed 0."""
+        and the approach planned on that circle backed and filled by the wall for a minute, stop 35); ``off_edge``: not
+        what holds it at speed 0 (:meth:`edge_state`)."""
         self.t, self.current_ned, self.current_std = t, current_ned, current_std_mps
         self.shearing = shear_weight > SHEARED_WEIGHT  # the estimator sees shear now
         self.sheared = self.sheared or self.shearing
@@ -147,19 +144,14 @@ class Helm:
         self.ability.update(t, asked, u, turn_rate_radps, way_known=current_ned is not None)
 
     def at_edge(self, p_ned: np.ndarray) -> bool:
-        """Whether ``p_ned`` [m] lies within ``EDGE_INSET_M`` of the area's edge, or beyond it (law/area.py). A boat
-        set onto a tank's wall there (or a bank) slides along it: its slip is not the current's, and read as such it
-        took the estimate 0.1 m/s off, whose innovations on the next headings then read as sheared water (a rudder
-        boat in a uniform current then held a still-water line across it and never arrived: the default campaign's
-        rudder start 2 toward the east, stop 30)."""
+        """Whether ``p_ned`` [m] lies at the area's edge or beyond it, where a wall may set, stop or turn a boat
+        (law/area.py ``at_edge``)."""
         return at_edge(self.law.outside_area, p_ned)
 
     def edge_state(self, p_ned: np.ndarray, current_ned: np.ndarray | None) -> tuple[bool, bool]:
-        """(at the area's edge, :meth:`at_edge`; and carried clear of it by ``current_ned`` within ``OFF_EDGE_S``). A
-        kinematic rudder boat that holds its ground at speed 0, held on its line 0.6 m upstream of the goal just beyond
-        the area's edge, learned nothing there of how speed 0 holds it, and was sent 0 for 40 s (the CI's toward N)."""
+        """(:meth:`at_edge`; and carried clear of the edge by ``current_ned``, law/area.py ``off_edge``)."""
         edge = self.at_edge(p_ned)
-        return edge, edge and current_ned is not None and not self.at_edge(p_ned + OFF_EDGE_S * np.asarray(current_ned))
+        return edge, edge and off_edge(self.law.outside_area, p_ned, current_ned)
 
     def on_station(self, heading_rad: float | None, offset_ned: np.ndarray | None = None) -> bool:
         """Whether the boat can stay where it is, ``offset_ned`` [m] from the goal (boat - goal; None: not known here).
@@ -250,11 +242,9 @@ class Helm:
         distance plus the station keeper's integral term ``bias_ned`` [m/s]). ``holding``: keeping station (a boat
         that turns in place keeps its hull on the current's line, law/maneuver.py)."""
         if heading_rad is None or (self.in_company and self.ability.needs_way):
-            # no attitude: all that can be sent is a velocity; among other boats the separation filter shapes the
-            # velocities of a boat that needs way (law/separation.py reasons about Rover's heading-and-speed
-            # reading of a velocity-only setpoint). A boat that turns in place goes ahead or astern even in
-            # company: pivoting 180 deg to reach a point just behind it takes ~25 s at 7 deg/s (the filter is told
-            # which way it drives, Neighbours.keep_separation).
+            # no attitude: all that can be sent is a velocity; among other boats the separation filter shapes a boat
+            # that needs way's velocities (law/separation.py reads them as Rover does). A boat that turns in place goes
+            # ahead or astern even in company: pivoting 180 deg to a point just behind it takes ~25 s at 7 deg/s.
             current = self._current(current_ned)
             return self._velocity(self.law.steer(wanted_ned, heading_rad, current, CRAB_MIN_SPEED_MPS))
         if self.ability.needs_way:
@@ -342,15 +332,15 @@ class Helm:
     def _on_line(
         self, p_ned: np.ndarray, heading_rad: float, current_ned: np.ndarray | None, bias_ned: np.ndarray | None = None
     ) -> Command:
-        # the line follows a current only once the estimate is clear of its own spread (early on, its direction
-        # swings with every turn, and so would the line), and until it is within one spread of nothing
+        # the line follows a current only once the estimate is clear of its own spread (early on its direction swings
+        # with every turn, and so would the line), and until it is within one spread of nothing
         c = self._line_current(self._current(current_ned), 1.0 if self.line.in_current else LINE_CURRENT_SIGMAS)
-        # in sheared water the current at the boat is no guide to the goal's (in the campaign's double gyre it turns
-        # by 90 deg within 0.3 m of the goal): a line along the estimate swung 5-15 deg/s, and the boat chasing it
-        # lined up too late or never (86.7% arrived in 180 runs); the still-water line, kept once chosen, 94.4%
-        # the capture search still drifts its model boat on the estimate at the boat (within 0.5 m of the goal, near
-        # the goal's), except while shear is seen there and then: the double gyre's current by the goal turns round
-        # every 10 s (drifting on it anyway, gyre seeds 31-32 arrived 65 and 62 of 72 times, against 69 without)
+        # in sheared water the current at the boat is no guide to the goal's (the campaign's double gyre turns it 90 deg
+        # within 0.3 m of the goal): a line along the estimate swung 5-15 deg/s, and the boat chasing it lined up too
+        # late or never (86.7% arrived in 180 runs); the still-water line, kept once chosen, 94.4%. The capture search
+        # drifts its model boat on the estimate at the boat (within 0.5 m of the goal, near the goal's) except while
+        # shear is seen there and then (the gyre's current by the goal turns round every 10 s: drifting on it anyway,
+        # seeds 31-32 arrived 65 and 62 of 72 times, against 69 without)
         drift, c = (None if self.shearing else c), (None if self.sheared else c)
         self.line.aim(p_ned, self.law.goal_ned, heading_rad, c, drift, self.t if self.arrived else None)
         self.line.stop_s = self.lags.stopping.lag_s
@@ -377,8 +367,8 @@ class Helm:
         return self._maneuver(m)
 
     def sent(self, velocity: tuple[float, float] | None, yaw: float | None = None) -> None:
-        """The setpoint that went out this tick: ``velocity`` [m/s] (None: none) and its ``yaw`` [rad] (None:
-        velocity only, which Rover drives ahead along it): what :attr:`lags` learn the boat's way from."""
+        """The setpoint that went out this tick, ``velocity`` [m/s] (None: none) and its ``yaw`` [rad] (None: velocity
+        only, which Rover drives ahead along it): what :attr:`lags` learn the boat's way from."""
         if velocity is None:
             self.asked_mps = self.sent_ned = None
             return
@@ -393,9 +383,8 @@ class Helm:
         return np.zeros(2) if self.sent_ned is None else self.sent_ned
 
     def _maneuver(self, m: Maneuver) -> Command:
-        """Ahead (a positive speed over ground along the heading) goes as velocity only, which Rover reads the same
-        way (heading = its direction, speed = its norm) and any vehicle that follows velocities understands;
-        astern, or speed exactly 0 (hold the heading), needs the yaw."""
+        """Ahead (a positive speed over ground along the heading) goes as velocity only, which Rover reads the same way
+        (heading: its direction, speed: its norm), as any vehicle that follows velocities; astern or 0 needs the yaw."""
         self.asked_heading = m.heading_rad
         return m.velocity_ned, (None if m.speed_mps > 0.0 else m.heading_rad)
 
