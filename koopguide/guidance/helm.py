@@ -137,7 +137,7 @@ class Helm:
         c = 0.0 if current_ned is None else float(np.asarray(current_ned) @ unit(heading_rad))
         asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
         pivots = None if self.ability.needs_way else asked  # a boat that turns in place may be turning first
-        at_rest = off_edge and self.asked_mps == 0.0  # a wall stops a boat too, but cannot hold it off the current
+        at_rest = off_edge and self.asked_mps == 0.0 and self.lags.sternway.able  # a wall can't hold it off the current
         self.lags.update(t, None if at_edge and not at_rest else self.asked_mps, c, u, pivots, not self.sheared)
         if at_edge or self.ability.moves_sideways:  # a boat that goes where it is sent turns as it will
             return
