@@ -617,6 +617,16 @@ def test_a_neighbour_heard_longer_ago_than_the_timeout_is_forgotten(zshape_model
     assert bench.sup.neighbours.latest == {}
 
 
+def area_edge(sup: Supervisor, inside_ned: np.ndarray, outside_ned: np.ndarray) -> np.ndarray:
+    """The last point inside the area (domain plus turning room) on the segment from ``inside_ned`` to
+    ``outside_ned`` [m], by bisection."""
+    inside, outside = inside_ned.astype(float), outside_ned.astype(float)
+    for _ in range(40):
+        mid = 0.5 * (inside + outside)
+        inside, outside = (mid, outside) if sup.law.outside_area(mid) == 0.0 else (inside, mid)
+    return inside
+
+
 def test_at_the_areas_edge_a_boat_the_current_carries_off_it_is_still_seen_to_hold_its_ground_at_speed_0(
     zshape_model: Path,
 ) -> None:
@@ -626,11 +636,7 @@ def test_at_the_areas_edge_a_boat_the_current_carries_off_it_is_still_seen_to_ho
     and was sent 0 for 40 s (the CI's flight toward N failed 10 of 10 times). There, speed 0 holding its ground is
     learned (estimation/speed_lag.py ``RestHold``); with the current into the edge it is not."""
     probe = Bench(zshape_model).sup
-    inside_n, outside_n = 1.0, -2.0  # the area's south edge (domain plus turning room) lies between, at E = 0
-    for _ in range(40):
-        mid = 0.5 * (inside_n + outside_n)
-        inside = probe.law.outside_area(np.array([mid, 0.0])) == 0.0
-        inside_n, outside_n = (mid, outside_n) if inside else (inside_n, mid)
+    inside_n = area_edge(probe, np.array([1.0, 0.0]), np.array([-2.0, 0.0]))[0]  # the area's south edge at E = 0
     beyond = np.array([inside_n - 0.03, 0.0])  # where the boat sat
     north, south = np.array([0.03, 0.0]), np.array([-0.03, 0.0])
     assert probe.helm.edge_state(beyond, north) == (True, True)  # carried off the edge: no wall holds it
@@ -652,11 +658,7 @@ def test_slip_at_the_areas_edge_is_not_read_as_current(zshape_model: Path) -> No
     current it took the estimate 0.1 m/s off, and its innovations then read as sheared water). The same slide
     well inside the area is measured."""
     probe = Bench(zshape_model).sup
-    inside_e, outside_e = -1.0, 2.0  # the area's east edge (domain plus turning room) lies between, at N = 1.5 m
-    for _ in range(40):
-        mid = 0.5 * (inside_e + outside_e)
-        inside = probe.law.outside_area(np.array([1.5, mid])) == 0.0
-        inside_e, outside_e = (mid, outside_e) if inside else (inside_e, mid)
+    inside_e = area_edge(probe, np.array([1.5, -1.0]), np.array([1.5, 2.0]))[1]  # the area's east edge at N = 1.5 m
     assert probe.helm.at_edge(np.array([1.5, inside_e - 0.03])) and probe.helm.at_edge(np.array([1.5, inside_e + 0.3]))
     assert not probe.helm.at_edge(np.array([1.5, inside_e - 0.15]))
     for east_m, measured in ((inside_e - 0.02, False), (inside_e - 0.6, True)):
