@@ -20,7 +20,7 @@ from koopguide.guidance.law.approach_path import MIN_SPEED_MPS as PATH_MIN_SPEED
 from koopguide.guidance.law.approach_path import STEP_M, STOP_GAIN, ApproachPath
 from koopguide.guidance.law.capture import ENTRY_RAD
 from koopguide.guidance.law.command import CURRENT_MIN_MPS
-from koopguide.guidance.law.creep_cycle import BACK_MARGIN_MPS, CREEP_M, CREEP_MPS
+from koopguide.guidance.law.creep_cycle import BACK_MARGIN_MPS, CREEP_M, CREEP_MPS, HOLD_WAY_MPS
 from koopguide.guidance.law.edge_reversal import EDGE_LEG_M
 from koopguide.guidance.law.line_approach import LineApproach
 from koopguide.guidance.law.maneuver import (
@@ -468,9 +468,47 @@ def test_holding_righting_the_bow_goes_no_more_than_creep_m_past_the_goal_then_d
     assert line.holding and line.astern == astern
     righting = [at(north, off) for north in (0.0, -0.05, -0.1)]  # upstream of the goal, still within CREEP_M
     assert all(sign * m.speed_mps > 0.0 and m.astern == astern for m in righting)  # way on, upstream
-    back = [at(north, off) for north in (-CREEP_M - 0.01, -0.05, 0.0, 0.5 * CREEP_M - 0.01)]
-    assert all(m.speed_mps == 0.0 for m in back)  # beyond CREEP_M: drift back, all the way onto the goal
-    assert sign * at(0.5 * CREEP_M + 0.01, off).speed_mps > 0.0  # then a creep upstream again, righting on the way
+    back = [at(north, off) for north in (-CREEP_M - 0.01, -0.05, 0.0, 0.5 * CREEP_M + 0.01, CREEP_M - 0.01)]
+    # beyond CREEP_M: drift back, all the way onto the goal and on (righting 30 deg on a 1.3 m circle runs further
+    # upstream than CREEP_M: its creep begins CREEP_M downstream, the most righting may run past the goal)
+    assert all(m.speed_mps == 0.0 for m in back)
+    assert sign * at(CREEP_M + 0.01, off).speed_mps > 0.0  # then a creep upstream again, righting on the way
+
+
+@pytest.mark.parametrize(
+    ("radius_m", "off_deg", "start"),
+    [
+        (0.56, 35.0, 0.111),  # a 2.72 s turn and 1 s coasting on, at 0.06 m/s over ground: a 0.223 m run
+        (0.8, 50.0, CREEP_M),  # a 0.43 m run: from CREEP_M, as far as righting may run past the goal
+        (0.56, 15.0, 0.5 * CREEP_M),  # within the righting threshold: no righting
+    ],
+)
+def test_holding_a_creep_that_rights_the_bow_begins_half_its_run_downstream_of_the_goal(
+    radius_m: float, off_deg: float, start: float
+) -> None:
+    """Drifting back onto the goal (from beyond CREEP_M upstream, where righting stops) a boat has no water past its
+    rudder: its bow stays as the hold found it. A no-astern
+    rudder boat (0.56 m circle) held 35 deg off was righted from CREEP_M / 2 downstream and ran 0.19 m upstream,
+    0.19 m from the goal. A creep that rights the bow begins half its run downstream instead: the turn down to
+    half the righting threshold at HOLD_WAY_MPS over ground (the current's speed more through the water), then the
+    way dying over the stopping time; at least CREEP_M / 2, at most CREEP_M. A bow within the threshold creeps
+    from CREEP_M / 2 as before."""
+    line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.075, way_mps=0.15, approach_mps=0.15)
+    line.stop_s = 1.0
+    goal, current, bow = np.zeros(2), np.array([0.03, 0.0]), math.pi  # current toward N, bow upstream (S)
+
+    def at(north: float, heading: float) -> Maneuver:
+        p = np.array([north, 0.0])
+        line.aim(p, goal, heading, current)
+        return line.command(p, goal, heading, radius_m=radius_m, current_ned=current, t=0.0)
+
+    off = wrap_pi(bow + math.radians(off_deg))
+    at(-CREEP_M - 0.03, bow)  # taken on beyond CREEP_M upstream of the goal
+    assert line.holding
+    drifting = [at(north, off).speed_mps for north in np.linspace(-CREEP_M - 0.02, start - 0.005, 12)]
+    assert all(s == 0.0 for s in drifting)  # the current carries it down, no creep yet
+    creep = at(start + 0.005, off).speed_mps
+    assert creep >= (HOLD_WAY_MPS if off_deg > 20.0 else CREEP_MPS)  # then way on upstream (righting the bow)
 
 
 @pytest.mark.parametrize("off_deg", [8.0, 20.0])

@@ -7,7 +7,8 @@ speed's sign, docs/rover.md). So it keeps station by a cycle about the goal: it 
 ``CREEP_MPS`` over ground, at most ``HOLD_MAX_MPS``) from ``CREEP_M`` / 2 downstream of the goal to ``CREEP_M``
 / 2 past it, then is sent speed 0 (Rover's stop controller: throttle off) while the current carries it back;
 with the bow off the line it keeps way on (at least ``HOLD_WAY_MPS``) until the bow is back, but no further than
-``CREEP_M`` past the goal (then it drifts back first).
+``CREEP_M`` past the goal (then it drifts back first). Drifting back no water passes the rudder and the bow stays
+off, so the creep that rights it begins half its run downstream of the goal, centring the run on it.
 
 Not every autopilot drifts at speed 0: one without Rover's stop controller holds the boat's ground at speed 0 (its
 speed loop over ground keeps way on against the current), and a boat that began its hold upstream of the goal then
@@ -52,6 +53,8 @@ class CreepCycle:
         error_rad: float,
         bias_mps: float = 0.0,
         current_mps: float = 0.0,
+        radius_m: float = 0.0,
+        stop_s: float = 0.0,
     ) -> float:
         """The speed over ground into the current [m/s], 0 to drift, negative to back down (downstream):
         ``to_go_m`` how far the goal lies upstream, ``cross_m`` the offset across the line, ``error_rad`` how far
@@ -63,7 +66,7 @@ class CreepCycle:
         self.righting = error_rad > (0.5 * self.righting_rad if self.righting else self.righting_rad)
         # a cycle about the goal, each creep long enough for the rudder to act (bursts of way at the goal, the boat
         # drifting back between them, steer it hardly at all)
-        if to_go_m >= 0.5 * CREEP_M:
+        if to_go_m >= self._creep_from_m(error_rad, radius_m, current_mps, stop_s):
             self.creeping = True
         elif to_go_m < -0.5 * CREEP_M:
             self.creeping = False
@@ -81,3 +84,19 @@ class CreepCycle:
         s = min(s, CREEP_MPS + self.gain * max(to_go_m + 0.5 * CREEP_M, 0.0))
         s = max(s, HOLD_WAY_MPS if self.righting else CREEP_MPS)  # the current's flow past the rudder and more
         return min(HOLD_MAX_MPS, s)
+
+    def _creep_from_m(self, error_rad: float, radius_m: float, current_mps: float, stop_s: float) -> float:
+        """How far downstream of the goal the next creep begins [m]: CREEP_M / 2; with the bow off the line, half
+        the run that righting it takes upstream over ground, so that the run is centred on the goal (at most
+        CREEP_M, as far as righting may run past it). A boat drifting back at speed 0 has no water past its rudder
+        and arrives with its bow as it left: a no-astern rudder boat held 35 deg off, righted from CREEP_M / 2
+        downstream, ran 0.19 m upstream, to 0.13 m past the goal and 0.19 m from it (0.16 m turning, 0.06 m coasting
+        on at the end)."""
+        if not self.righting:
+            return 0.5 * CREEP_M
+        # a turn at the radius through the error down to the end of righting, through the water at HOLD_WAY_MPS
+        # over ground and the current's speed (the current's share of that run is taken off over ground), then
+        # the way dying over ``stop_s``
+        turn = radius_m * max(error_rad - 0.5 * self.righting_rad, 0.0) / (HOLD_WAY_MPS + current_mps)  # [s]
+        run = HOLD_WAY_MPS * (turn + stop_s)
+        return min(CREEP_M, max(0.5 * CREEP_M, 0.5 * run))
