@@ -487,12 +487,11 @@ def test_holding_a_creep_that_rights_the_bow_begins_half_its_run_downstream_of_t
     radius_m: float, off_deg: float, start: float
 ) -> None:
     """Drifting back onto the goal (from beyond CREEP_M upstream, where righting stops) a boat has no water past its
-    rudder: its bow stays as the hold found it. A no-astern
-    rudder boat (0.56 m circle) held 35 deg off was righted from CREEP_M / 2 downstream and ran 0.19 m upstream,
-    0.19 m from the goal. A creep that rights the bow begins half its run downstream instead: the turn down to
-    half the righting threshold at HOLD_WAY_MPS over ground (the current's speed more through the water), then the
-    way dying over the stopping time; at least CREEP_M / 2, at most CREEP_M. A bow within the threshold creeps
-    from CREEP_M / 2 as before."""
+    rudder: its bow stays as the hold found it. A no-astern rudder boat (0.56 m circle) held 35 deg off was righted
+    from CREEP_M / 2 downstream and ran 0.19 m upstream, 0.19 m from the goal. A creep that rights the bow begins half
+    its run downstream instead: the turn down to half the righting threshold at HOLD_WAY_MPS over ground (the
+    current's speed more through the water), then the way dying over the stopping time; at least CREEP_M / 2, at most
+    CREEP_M. A bow within the threshold creeps from CREEP_M / 2 as before."""
     line = LineApproach(max_speed_mps=0.3, gain_per_s=0.5, settle_m=0.075, way_mps=0.15, approach_mps=0.15)
     line.stop_s = 1.0
     goal, current, bow = np.zeros(2), np.array([0.03, 0.0]), math.pi  # current toward N, bow upstream (S)
