@@ -203,7 +203,8 @@ class LineApproach:
         if planned is not None:
             return self._finish(planned, heading_rad, current_ned, water_mps)
         a, n, along, cross = self._line_frame(e)  # the plan may have chosen the other end of the line
-        delta = min(MAX_DELTA_M, max(MIN_DELTA_M, radius_m if radius_m is not None else DEFAULT_RADIUS_M))
+        radius = radius_m if radius_m is not None else DEFAULT_RADIUS_M
+        delta = min(MAX_DELTA_M, max(MIN_DELTA_M, radius))
         h = unit(heading_rad)
         # which way along the line to the goal (the bow lies along +a, so +1 is ahead): past the goal by the leash
         # (FLIP_M once on the line), the other way
@@ -217,7 +218,7 @@ class LineApproach:
 
         if self.holding and self.in_current and current_ned is not None:
             return self._finish(
-                self._hold_in_current(p, goal_ned, heading_rad, delta, a, n, cross, current_ned, bias_ned, radius_m),
+                self._hold_in_current(p, goal_ned, heading_rad, delta, a, n, cross, current_ned, bias_ned, radius),
                 heading_rad,
                 current_ned,
                 water_mps,
@@ -277,7 +278,7 @@ class LineApproach:
         cross: float,
         current_ned: np.ndarray,
         bias_ned: np.ndarray | None,
-        radius_m: float | None,
+        radius_m: float,
     ) -> Maneuver:
         """On the current's line near the goal: into the current only, ahead (bow upstream) or astern (bow
         downstream), by the creep cycle about the goal (law/creep_cycle.py), steering by LOS onto the line."""
@@ -288,8 +289,8 @@ class LineApproach:
         heading = los_heading(self.travel, delta, a, n, cross)
         to_go = float((np.asarray(goal_ned, dtype=float) - p) @ up)  # how far the goal lies upstream [m]
         bias = 0.0 if bias_ned is None else self.travel * float(np.asarray(bias_ned, dtype=float) @ unit(heading))
-        error, radius = abs(wrap_pi(heading - heading_rad)), radius_m if radius_m is not None else DEFAULT_RADIUS_M
-        s = self.cycle.speed(to_go, cross, error, bias, float(np.hypot(*c)), radius, self.stop_s)
+        error = abs(wrap_pi(heading - heading_rad))
+        s = self.cycle.speed(to_go, cross, error, bias, float(np.hypot(*c)), radius_m, self.stop_s)
         # backed down (s < 0): stern first through the water, whichever end faces upstream
         speed = self.travel * (s if s < 0.0 else max(s, MIN_SPEED_MPS) if s > 0.0 else 0.0)
         return Maneuver(heading, speed, self.travel > 0 if s < 0.0 else self.astern)
