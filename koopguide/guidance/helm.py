@@ -189,12 +189,10 @@ class Helm:
 
     def coasts_within(self, offset_ned: np.ndarray) -> bool:
         """Whether the boat holding its line, ``offset_ned`` [m] from the goal (boat - goal), comes to rest over ground
-        within the arrival radius: its ground velocity dies away over its stopping time (estimation/speed_lag.py). A
-        kinematic rudder boat of a 2 s speed lag took on its hold crossing the goal at 0.16-0.2 m/s, was declared
-        arrived, and ran on 0.22-0.31 m (Zshape demo starts, currents toward N and W: 0 of 14 within issue 10's hold
-        bound, stop 47). Unknown at the area's edge (no ground velocity there): the hold decides. Not asked in sheared
-        water, where the current under the boat, which no command stops, is most of its ground velocity (the default
-        campaign's rudder boat then missed a double gyre start it had arrived from in 57 s)."""
+        within the arrival radius, its ground velocity dying away over its stopping time (a kinematic rudder boat of a
+        2 s lag, declared arrived crossing the goal at 0.16-0.2 m/s, ran on 0.22-0.31 m: stop 47). At the area's edge
+        (no ground velocity) the hold decides. Not asked in sheared water, where the current under the boat, which no
+        command stops, is most of its ground velocity (the rudder boat then missed a double gyre start)."""
         return self.ground_ned is None or self._rests_within(offset_ned, self.ground_ned)
 
     def stops_within(self, offset_ned: np.ndarray, heading_rad: float) -> bool:
@@ -375,12 +373,14 @@ class Helm:
         v = self.sent_ned = np.asarray(velocity, dtype=float)
         self.asked_mps = float(np.hypot(*v)) if yaw is None else float(v @ unit(yaw))
 
-    def water_sent(self) -> np.ndarray | None:
-        """The boat's velocity through the water as sent [m/s], for a boat that goes where it is sent (none sent:
-        at rest in the water); None for any other boat, whose slip measures the current."""
-        if not self.ability.moves_sideways:
-            return None
-        return np.zeros(2) if self.sent_ned is None else self.sent_ned
+    def water_sent(self) -> tuple[np.ndarray, float] | None:
+        """The boat's velocity through the water [m/s] and the spread of its way along the heading, where known: a boat
+        that goes where it is sent (as sent; none sent: at rest); one stopped in sheared water (0, its way dying away:
+        ``BoatLags.way_left_mps``, stop 54). None otherwise: its slip measures the current."""
+        if self.ability.moves_sideways:
+            return (np.zeros(2) if self.sent_ned is None else self.sent_ned), 0.0
+        way = self.lags.way_left_mps if self.sheared else None
+        return None if way is None else (np.zeros(2), way)
 
     def _maneuver(self, m: Maneuver) -> Command:
         """Ahead (a positive speed over ground along the heading) goes as velocity only, which Rover reads the same way

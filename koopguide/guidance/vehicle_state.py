@@ -117,18 +117,19 @@ class VehicleState:
         if self.gate.global_ok(fix):
             self.global_fix = (fix.t_s, fix.lat_deg, fix.lon_deg)
 
-    def update_current(self, t: float, drifting: bool = False, water_ned: np.ndarray | None = None) -> None:
+    def update_current(self, t: float, drifting: bool = False, water: tuple[np.ndarray, float] | None = None) -> None:
         """Fold the fix at ``t`` and a heading of about the same moment into the current estimate; reset
-        the estimate when it leaves its bounds (a current faster than ``limits.max_current_mps``). ``water_ned``:
+        the estimate when it leaves its bounds (a current faster than ``limits.max_current_mps``). ``water``:
         the boat's velocity through the water when it is known [m/s] (a boat that goes where it is sent: the
-        velocity sent), so that the ground velocity less it measures both components, as when drifting."""
+        velocity sent; one stopped, adrift: 0) and the standard deviation of its way along the heading [m/s], so
+        that the ground velocity less it measures both components, as when drifting."""
         att = self.attitude
         if att is None or self.fix_t is None or abs(att[0] - t) > ATTITUDE_PAIR_S:
             return
-        v = self.tracker.predict(t)[1]
-        if water_ned is not None:
-            v, drifting = v - np.asarray(water_ned, dtype=float), True
-        self.current.update(t, v, att[1], att[2], drifting)
+        v, way_std = self.tracker.predict(t)[1], 0.0
+        if water is not None:
+            v, drifting, way_std = v - np.asarray(water[0], dtype=float), True, water[1]
+        self.current.update(t, v, att[1], att[2], drifting, way_std)
         c = self.current.current_ned
         if not (np.all(np.isfinite(c)) and float(np.hypot(*c)) <= self.cfg.limits.max_current_mps):
             self.notes.append(

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from koopguide.guidance import settings
+from koopguide.guidance.estimation import current as current_module
 from koopguide.guidance.estimation.current import CurrentEstimator
 from koopguide.guidance.estimation.turning import TurnAbility
 from koopguide.guidance.law.command import CRAB_MIN_SPEED_MPS, GuidanceState, along_current, crab
@@ -305,3 +306,36 @@ def test_a_goal_just_off_straight_downstream_asked_at_the_approach_cap_is_drifte
         planner = ManeuverPlanner(command.max_speed_mps, command.turn_speed_mps, math.radians(arrival.facing_deg))
         planner.plan(v, math.pi, c, TurnAbility(), distance_m=float(distance))  # bow downstream, a boat that pivots
         assert planner.drifting, (off_deg, float(distance), float(np.hypot(*(v - c))) / 0.03)
+
+
+def stop_adrift(est: CurrentEstimator, truth: np.ndarray, way0: float = 0.2, lag: float = 1.2) -> float:
+    """20 s heading east at ``way0`` through the water in ``truth``, then stopped (the way dying over ``lag``) and fed
+    as adrift at the service's 20 fixes a second for 8 s; returns the current along the heading's largest value
+    [m/s]. The way left is bounded as ``BoatLags.way_left_mps`` bounds it (the way at the stop and 0.05 m/s)."""
+    east, rng, peak = math.pi / 2, np.random.default_rng(3), -1.0
+    for k in range(400):  # heading east: the east component is never seen
+        est.update(k * 0.05, np.array([0.0, way0]) + truth + rng.normal(0, 0.004, 2), east, 0.0)
+    assert est.current_ned[0] == pytest.approx(truth[0], abs=0.004)
+    assert abs(est.current_ned[1] - truth[1]) > 0.04  # along the heading: still the prior's 0
+    for k in range(1, 161):
+        fade = math.exp(-k * 0.05 / lag)
+        ground = np.array([0.0, way0 * fade]) + truth + rng.normal(0, 0.004, 2)
+        est.update(20.0 + k * 0.05, ground, east, 0.0, drifting=True, way_std_mps=(way0 + 0.05) * fade)
+        peak = max(peak, float(est.current_ned[1]))
+    return peak
+
+
+def test_a_boat_stopped_adrift_shows_the_current_along_its_heading_as_its_way_dies(monkeypatch):
+    """The slip shows only the current across the heading; a boat stopped with the throttle off drifts with the water,
+    so its ground velocity shows the rest once its way has gone. Fed while the way still dies (the way left counted as
+    noise along the heading, ``way_std_mps``), the estimate moves onto the current along the heading (stop 54: in the
+    double gyre the slip alone left it 0.06-0.13 m/s off by the goal), taking little of the way for current: the way
+    is one bias through the stop, so it counts ``WAY_BIAS`` times over (counted once: overshot by 0.047 m/s)."""
+    truth = np.array([0.03, 0.05])
+    est = CurrentEstimator(with_shear(SHEARED))
+    overshoot = stop_adrift(est, truth) - truth[1]
+    np.testing.assert_allclose(est.current_ned, truth, atol=0.005)
+    monkeypatch.setattr(current_module, "WAY_BIAS", 1.0)
+    once = stop_adrift(CurrentEstimator(with_shear(SHEARED)), truth) - truth[1]
+    assert overshoot < 0.5 * once  # 0.024 against 0.047 m/s
+    assert overshoot < 0.5 * truth[1]  # never as far off as the stale estimate was

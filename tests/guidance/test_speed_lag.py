@@ -25,6 +25,7 @@ from koopguide.guidance.estimation.speed_lag import (
     REST_SETTLE_LAGS,
     TRIAL_S,
     TRIAL_SETTLE_S,
+    WAY_ERROR_MPS,
     BoatLags,
     SpeedLag,
     SternwayTrial,
@@ -343,3 +344,28 @@ def test_speed_0_in_a_current_against_the_bow_tells_the_simulators_boat_from_one
     drift = float(run[-1, 1] - run[every * 60, 1])  # N over the last 14 s [m]
     assert (drift > -0.05) if holds_ground else (drift < -0.25)  # it stays, or goes with the current
     assert lags.rest.holds is holds_ground
+
+
+def test_a_stopped_boat_s_way_left_dies_over_its_stopping_lag_from_what_it_had() -> None:
+    """Speed 0 sent, the way the boat has left is bounded by the way it had then (known within WAY_ERROR_MPS) dying
+    over the stopping lag: what the current estimate counts as noise along the heading when it reads the drift of a
+    boat stopped in sheared water (stop 54). None while propelled, after a gap, or for a boat whose speed 0 holds its
+    ground."""
+    lags = BoatLags(PRIOR_S, 1.0)
+    lags.update(0.0, 0.2, 0.0, 0.12)
+    assert lags.way_left_mps is None  # propelled
+    n = round(REST_SETTLE_LAGS * PRIOR_S / TICK_S)
+    for k in range(n + 1):  # speed 0 for three of the prior's lags, the way dying at that lag
+        lags.update(0.1 + k * TICK_S, 0.0, 0.0, 0.12 * math.exp(-k * TICK_S / PRIOR_S))
+    lag, t = lags.stopping.lag_s, 0.1 + n * TICK_S
+    assert lag == pytest.approx(PRIOR_S, rel=0.05)
+    assert lags.way_left_mps == pytest.approx((0.12 + WAY_ERROR_MPS) * math.exp(-n * TICK_S / lag), rel=1e-9)
+    assert lags.way_left_mps < 0.06 * (0.12 + WAY_ERROR_MPS)  # about 5% of it
+    lags.update(t + 2 * MAX_GAP_S, 0.0, 0.0, 0.0)  # after a gap in telemetry speed 0 is watched anew
+    assert lags.way_left_mps == pytest.approx(WAY_ERROR_MPS)
+    lags.update(t + 2 * MAX_GAP_S + TICK_S, 0.1, 0.0, 0.0)
+    assert lags.way_left_mps is None
+    holds = BoatLags(PRIOR_S, 1.0)
+    settle = REST_SETTLE_LAGS * holds.stopping.lag_s
+    feed_rest(holds, settle + REST_S + 0.2, -0.03, 0.0)
+    assert holds.rest.holds and holds.way_left_mps is None  # its autopilot keeps way on at 0: not adrift

@@ -25,7 +25,8 @@ the hold may follow the current's line (docs/guidance.md, "Where it fails").
 Prior ``c = 0`` with ``current_prior_std_mps``; measurement ``z = v_ground . n(psi)`` with ``H = n(psi)^T``
 and the fix's velocity noise. Measurements while the boat turns faster than ``current_max_turn_dps`` are
 skipped: in a turn the hull does slip sideways through the water, which would read as current. A boat that is
-not propelled (disarmed) drifts with the water: then its whole ground velocity measures the current (H = I).
+not propelled (disarmed) drifts with the water: then its whole ground velocity measures the current (H = I); so
+does one stopped with the throttle off, its way still dying along its heading counted as noise there.
 
 The hull's own slip in the gentler turns that are measured is learned with the current: in a steady turn a hull
 slips sideways in proportion to its speed through the water times its turn rate (the steady turn of the linear
@@ -57,6 +58,9 @@ SLIP_SAMPLE_S = 0.2  # one innovation stands for at most this long of that windo
 SLIP_CLIP_ONSETS = 3.0  # ... and counts at most this many current_shear_onset_mps (a spike is one; shear keeps coming)
 SWAY_PRIOR_S = 1.0  # the prior spread of kappa, the hull's slip per unit of speed times turn rate [s]
 SWAY_LAG_S = 1.0  # the second sway regressor: speed times turn rate low-passed with this time constant [s]
+WAY_BIAS = 3.0  # the way a stopped boat has left is one bias through the stop, not noise from fix to fix: its spread
+# counts this many times over (counted once, the filter took the same bias at each fix: stopped from 0.2 m/s, fixes at
+# 10 Hz, the current along the heading overshot by 0.047 m/s; 0.013 so; stop 54)
 C = slice(0, 2)  # the current's part of the state (c_N, c_E); then kappa_0, kappa_1 [s]
 
 
@@ -102,11 +106,18 @@ class CurrentEstimator:
         return min(max(math.sqrt(self.slip_ms) / onset - 1.0, 0.0), 1.0)
 
     def update(
-        self, t: float, v_ground: np.ndarray, heading_rad: float, turn_rate_radps: float, drifting: bool = False
+        self,
+        t: float,
+        v_ground: np.ndarray,
+        heading_rad: float,
+        turn_rate_radps: float,
+        drifting: bool = False,
+        way_std_mps: float = 0.0,
     ) -> bool:
         """Fold in the ground velocity (N, E) [m/s] seen at vehicle time ``t`` [s] with the boat's heading
         and turn rate; False when the measurement was skipped (turning fast, or not finite). ``drifting``: the
-        boat is not propelled (disarmed), so its whole ground velocity is the current's."""
+        boat is not propelled (disarmed, or stopped with the throttle off), so its whole ground velocity is the
+        current's, less any way it has left along its heading, of standard deviation ``way_std_mps``."""
         v_ground = np.asarray(v_ground, dtype=float)
         if not (np.all(np.isfinite(v_ground)) and math.isfinite(heading_rad) and math.isfinite(turn_rate_radps)):
             return False
@@ -125,7 +136,11 @@ class CurrentEstimator:
         if abs(turn_rate_radps) > math.radians(s.current_max_turn_dps):
             return False
         if drifting:  # both components at once
-            z, H, R = v_ground.copy(), np.eye(2, 4), np.eye(2) * s.velocity_std_mps**2
+            z, H, R = (
+                v_ground.copy(),
+                np.eye(2, 4),
+                np.eye(2) * s.velocity_std_mps**2 + (WAY_BIAS * way_std_mps) ** 2 * np.outer(h, h),
+            )
         else:
             H = np.array([[-h[1], h[0], ur, self.turning]])  # across the heading (starboard), and the hull's slip
             z, R = np.array([float(H[0, C] @ v_ground)]), self.kf.R

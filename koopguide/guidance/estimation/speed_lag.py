@@ -76,6 +76,8 @@ REST_CARRY_FRACTION = 0.25  # carried back along its heading by less than this f
 # along it, the boat holds its ground at rest (Rover's stop controller, stopped from 0.06-0.25 m/s in 0.03 m/s
 # against the bow or 30 deg off it: the simulator's rudder boat carried 0.63-1.0 of it in the first verdict, the
 # heavy hull with a weak astern 0.49-0.88, then 0.83-1.0; a boat that holds its ground, about 0)
+WAY_ERROR_MPS = 0.05  # the way a boat had when speed 0 was sent is known within this (in sheared water the current
+# along its heading, which the way is reckoned against, was 0.06-0.13 m/s off in the double gyre, stop 54) [m/s]
 
 
 def follows(t_last: float | None, t: float) -> bool:
@@ -218,6 +220,18 @@ class BoatLags:
         self.ahead, self.astern = SpeedLag(way_prior_s), SpeedLag(way_prior_s)
         self.sternway = SternwayTrial()
         self.rest = RestHold()
+        self._stop_since: float | None = None  # vehicle time speed 0 began to stand, unbroken (None: it does not) [s]
+        self._stop_way = 0.0  # the way through the water the boat had then [m/s]
+        self._t: float | None = None  # the last sample's time [s]
+
+    @property
+    def way_left_mps(self) -> float | None:
+        """While speed 0 stands and is not known to hold the boat's ground (:class:`RestHold`: Rover's stop controller
+        puts the throttle off and the boat drifts with the water): a bound on the way it has left [m/s], the way it
+        had when speed 0 was sent (known within ``WAY_ERROR_MPS``) dying away over the stopping lag; None otherwise."""
+        if self._stop_since is None or self._t is None or self.rest.holds:
+            return None
+        return (abs(self._stop_way) + WAY_ERROR_MPS) * math.exp(-(self._t - self._stop_since) / self.stopping.lag_s)
 
     def update(
         self,
@@ -238,6 +252,9 @@ class BoatLags:
         estimate is a guide to the water at the boat (not in sheared water, where the boat at rest may be carried by
         less than the estimate says: then no evidence of speed 0 holding its ground, :class:`RestHold`)."""
         stop = asked_mps is not None and abs(asked_mps) <= 1e-9
+        if not (stop and self._stop_since is not None and follows(self._t, t)):  # speed 0 begins (or none stands)
+            self._stop_since, self._stop_way = (t if stop else None), speed_water_mps
+        self._t = t
         target = None if asked_mps is None or stop else asked_mps - current_along_mps
         steady = heading_error_rad is None or abs(heading_error_rad) <= TRIAL_HEADING_RAD
         self.sternway.update(t, target if steady else None, speed_water_mps)  # astern, however fast
