@@ -675,3 +675,34 @@ def test_slip_at_the_areas_edge_is_not_read_as_current(zshape_model: Path) -> No
         estimate = b.sup.vehicle.current.current_ned
         assert (b.sup.vehicle.current.updates > before) is measured, (east_m, before)
         assert (float(np.hypot(*estimate)) > 0.03) is measured, (east_m, estimate)
+
+
+@pytest.mark.parametrize("sheared", [True, False])
+def test_a_boat_stopped_in_sheared_water_measures_the_current_along_its_heading_from_its_drift(
+    zshape_model: Path, sheared: bool
+) -> None:
+    """A boat sent speed 0 (Rover's stop controller: throttle off) drifts with the water once its way has gone, so in
+    water seen to be sheared its ground velocity measures the current along its heading, which its slip never shows
+    (stop 54: in the double gyre the estimate was 0.06-0.13 m/s off along the heading by the goal, and the capture
+    search waited on a drift back to the goal that carried the boat off). In uniform water the estimate is left to the
+    slip and to the turns (``RestHold`` judges from it whether speed 0 holds the boat's ground)."""
+    b = Bench(zshape_model)
+    b.p, east, c = np.array([1.0, -1.0]), math.pi / 2, np.array([0.01, 0.05])
+    b.heading = east
+    b.fly(0.5, current=c, obey=False)
+    helm, current = b.sup.helm, b.sup.vehicle.current
+    helm.sheared = sheared
+    for _ in range(200):  # 10 s at speed 0, bow east, the way (0.15 m/s) dying away over 1.2 s
+        way = 0.15 * math.exp(-(b.t - 10.5) / 1.2)
+        b.v = c + way * np.array([0.0, 1.0])
+        helm.sent((0.0, 0.0), east)
+        helm.observe(b.t, east, 0.0, b.v, current.current_ned, current.seen_std_mps, 0.0)
+        helm.sheared = sheared
+        b.fix()
+        b.attitude()
+        b.sup.update_current(b.t)
+        b.p = b.p + b.v * DT
+        b.advance()
+    estimate = current.current_ned
+    assert estimate[0] == pytest.approx(c[0], abs=0.005)  # across the heading: the slip shows it either way
+    assert bool(abs(estimate[1] - c[1]) < 0.01) is sheared, estimate  # along it: only from the drift
