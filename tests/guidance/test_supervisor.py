@@ -697,7 +697,6 @@ def test_a_boat_stopped_in_sheared_water_measures_the_current_along_its_heading_
         b.v = c + way * np.array([0.0, 1.0])
         helm.sent((0.0, 0.0), east)
         helm.observe(b.t, east, 0.0, b.v, current.current_ned, current.seen_std_mps, 0.0)
-        helm.sheared = sheared
         b.fix()
         b.attitude()
         b.sup.update_current(b.t)
