@@ -6,11 +6,11 @@ directly), and everywhere for a boat seen to need way through the water to turn,
 setpoint, ahead or astern (law/maneuver.py): that is what lets a skid-steer boat back onto a goal behind it instead
 of circling it, and a rudder boat keep the way its rudder needs. How the boat turns, and how far it runs on when
 told to stop, are learned from its telemetry (estimation/turning.py, estimation/speed_lag.py), first asked by the turn
-probe (turn_probe.py); a boat seen to go where it is sent whatever its heading is sent velocities. In water the current
-estimator has seen to be sheared (``SHEARED_WEIGHT``) a boat that needs way holds the still-water line near the
-goal: the current at the boat is no guide to the goal's there. It arrives there off that line too, once its way would
-stop it within the arrival radius, and its capture search makes for that and keeps it so (law/capture.py). See
-docs/guidance.md "Any boat".
+probe (turn_probe.py); a boat seen to go where it is sent whatever its heading is sent velocities. What it knows of
+the boat it reads from telemetry (boat_reading.py). In water the current estimator has seen to be sheared a boat that
+needs way holds the still-water line near the goal: the current at the boat is no guide to the goal's there. It
+arrives there off that line too, once its way would stop it within the arrival radius, and its capture search makes
+for that and keeps it so (law/capture.py). See docs/guidance.md "Any boat".
 
 Conventions: NED velocities ``(2,)`` [m/s], headings [rad] from north, turn rates [rad/s], vehicle seconds.
 """
@@ -21,21 +21,16 @@ import math
 
 import numpy as np
 
-from koopguide.guidance.estimation.speed_lag import BoatLags
-from koopguide.guidance.estimation.turning import TurnAbility
-from koopguide.guidance.law.approach_path import STOP_GAIN
-from koopguide.guidance.law.area import at_edge, off_edge
-from koopguide.guidance.law.capture import SPEED_LAG_S
+from koopguide.guidance.boat_reading import BoatReading
 from koopguide.guidance.law.command import (
     CRAB_MIN_SPEED_MPS,
-    CURRENT_MIN_MPS,
     GuidanceLaw,
     GuidanceState,
     Setpoint,
     along_current,
 )
 from koopguide.guidance.law.line_approach import DEFAULT_RADIUS_M, LineApproach
-from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, unit, wrap_pi
+from koopguide.guidance.law.maneuver import Maneuver, ManeuverPlanner, unit
 from koopguide.guidance.settings import GuidanceConfig
 from koopguide.guidance.turn_probe import Command, TurnProbe
 
@@ -44,16 +39,16 @@ LINE_DOING = "making for the line it can hold the goal on"  # near the goal, a b
 DRIFT_DOING = "drifting onto the goal on the current's line"  # near it, a boat that turns in place (law/maneuver.py)
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
 LINE_LEAVE = 1.25  # ... and goes back to following the field only beyond this many times that distance
-SHEARED_WEIGHT = 0.5  # the current estimator's shear weight beyond which the water is sheared (estimation/current.py)
 # how the boat came on station, for the arrival's log line (:meth:`Helm.on_station`; "": the usual way)
 OFF_LINE_HOW = " (sheared water, off its line: its way would stop it within the arrival radius)"
 
 
-class Helm:
+class Helm(BoatReading):
     """Call :meth:`observe` once per command with the boat's state, then :meth:`near` or :meth:`follow`."""
 
     def __init__(self, cfg: GuidanceConfig, law: GuidanceLaw) -> None:
-        self.cfg, self.law, command = cfg, law, cfg.command
+        super().__init__(cfg, law)
+        command = cfg.command
         self.planner = ManeuverPlanner(
             command.max_speed_mps, command.turn_speed_mps, math.radians(cfg.arrival.facing_deg)
         )
@@ -61,18 +56,7 @@ class Helm:
         self.line = LineApproach(
             command.max_speed_mps, gain, settle, command.turn_speed_mps, command.approach_speed_mps
         )
-        self.speed_mps = 0.0  # the boat's ground speed at the last observation [m/s]
-        self.water_mps = 0.0  # ... and its speed through the water along its heading (negative: astern) [m/s]
-        self.ground_ned: np.ndarray | None = None  # ... its ground velocity (None at the area's edge) [m/s]
-        self.t: float | None = None  # vehicle time of the last observation [s]
-        self.current_ned: np.ndarray | None = None  # the current estimate [m/s]
-        self.current_std = 0.0  # the current estimate's spread [m/s]
-        self.sheared = False  # the water has shown shear (latched: a property of the water, not of the boat)
-        self.shearing = False  # ... and shows it now
         self.doing = "following the field"  # what the last command did (for the status's reason)
-        self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
-        self.sent_ned: np.ndarray | None = None  # the velocity last sent [m/s] (None: none went out)
-        self.asked_mps: float | None = None  # speed over ground along the heading last sent (<0: astern; :meth:`sent`)
         # other boats are heard (fleet): following the field and a boat that needs way go velocity-only, as the
         # separation filter expects; a boat that turns in place keeps its ahead-or-astern maneuver near a point
         self.in_company = False
@@ -82,13 +66,11 @@ class Helm:
 
     def reset(self) -> None:
         """A restarted vehicle (maybe another boat): forget how it turns (and, at the start, set it up)."""
-        self.ability = TurnAbility()
-        self.lags = BoatLags(1.0 / STOP_GAIN, SPEED_LAG_S)  # how its way follows speed 0, ahead and astern
+        super().reset()
         self.turn_probe = TurnProbe(self.cfg.command, self.law.outside_area)  # how it turns and stops, asked first
         self.planner.reset()
         self.line.reset()
         self.line.capture.forget()  # the circle it was seen to turn on in the capture's manoeuvres
-        self.asked_heading = None
 
     def probe(self, t: float, heading_rad: float | None, p_ned: np.ndarray | None = None) -> Command | None:
         """The turn probe's setpoint at the start of guiding (guidance/turn_probe.py), None once it is done."""
@@ -104,54 +86,6 @@ class Helm:
         radius = self.ability.radius_m
         needs = self.ability.needs_way and radius is not None and not self.in_company
         return max(self.cfg.command.lookahead_m, 2.0 * radius) if needs else None
-
-    def observe(
-        self,
-        t: float,
-        heading_rad: float | None,
-        turn_rate_radps: float | None,
-        velocity_ned: np.ndarray | None,
-        current_ned: np.ndarray | None,
-        current_std_mps: float = 0.0,
-        shear_weight: float = 0.0,
-        at_edge: bool = False,
-        off_edge: bool = False,
-    ) -> None:
-        """The boat's heading, turn rate, ground velocity and the estimated current (and its spread, and how much
-        shear its estimator sees: ``CurrentEstimator.shear_weight``) at vehicle time ``t``. ``at_edge``: the boat
-        is at the area's edge (:meth:`at_edge`), where a wall may turn or stop it: how it turns and stops is not
-        learned there (a rudder boat of a 2.4 m circle set onto a tank's wall turned on it as if on a 0.8 m one,
-        and the approach planned on that circle backed and filled by the wall for a minute, stop 35); ``off_edge``: not
-        what holds it at speed 0 (:meth:`edge_state`)."""
-        self.t, self.current_ned, self.current_std = t, current_ned, current_std_mps
-        self.shearing = shear_weight > SHEARED_WEIGHT  # the estimator sees shear now
-        self.sheared = self.sheared or self.shearing
-        if velocity_ned is not None:
-            self.speed_mps = float(np.hypot(*velocity_ned))
-        if heading_rad is None or turn_rate_radps is None or velocity_ned is None:
-            return
-        water = np.asarray(velocity_ned, dtype=float) - (0.0 if current_ned is None else np.asarray(current_ned))
-        u = float(water[0] * math.cos(heading_rad) + water[1] * math.sin(heading_rad))
-        self.water_mps = u
-        self.ground_ned = None if at_edge else np.asarray(velocity_ned, dtype=float)  # a wall sets a boat sideways
-        c = 0.0 if current_ned is None else float(np.asarray(current_ned) @ unit(heading_rad))
-        asked = None if self.asked_heading is None else wrap_pi(self.asked_heading - heading_rad)
-        pivots = None if self.ability.needs_way else asked  # a boat that turns in place may be turning first
-        at_rest = off_edge and self.asked_mps == 0.0 and self.lags.sternway.able  # a wall can't hold it off the current
-        self.lags.update(t, None if at_edge and not at_rest else self.asked_mps, c, u, pivots, not self.sheared)
-        if at_edge or self.ability.moves_sideways:  # a boat that goes where it is sent turns as it will
-            return
-        self.ability.update(t, asked, u, turn_rate_radps, way_known=current_ned is not None)
-
-    def at_edge(self, p_ned: np.ndarray) -> bool:
-        """Whether ``p_ned`` [m] lies at the area's edge or beyond it, where a wall may set, stop or turn a boat
-        (law/area.py ``at_edge``)."""
-        return at_edge(self.law.outside_area, p_ned)
-
-    def edge_state(self, p_ned: np.ndarray, current_ned: np.ndarray | None) -> tuple[bool, bool]:
-        """(:meth:`at_edge`; and carried clear of the edge by ``current_ned``, law/area.py ``off_edge``)."""
-        edge = self.at_edge(p_ned)
-        return edge, edge and off_edge(self.law.outside_area, p_ned, current_ned)
 
     def on_station(self, heading_rad: float | None, offset_ned: np.ndarray | None = None) -> bool:
         """Whether the boat can stay where it is, ``offset_ned`` [m] from the goal (boat - goal; None: not known here).
@@ -364,36 +298,11 @@ class Helm:
         )
         return self._maneuver(m)
 
-    def sent(self, velocity: tuple[float, float] | None, yaw: float | None = None) -> None:
-        """The setpoint that went out this tick, ``velocity`` [m/s] (None: none) and its ``yaw`` [rad] (None: velocity
-        only, which Rover drives ahead along it): what :attr:`lags` learn the boat's way from."""
-        if velocity is None:
-            self.asked_mps = self.sent_ned = None
-            return
-        v = self.sent_ned = np.asarray(velocity, dtype=float)
-        self.asked_mps = float(np.hypot(*v)) if yaw is None else float(v @ unit(yaw))
-
-    def water_sent(self) -> tuple[np.ndarray, float] | None:
-        """The boat's velocity through the water [m/s] and the spread of its way along the heading, where known: a boat
-        that goes where it is sent (as sent; none sent: at rest); one stopped in sheared water (0, its way dying away:
-        ``BoatLags.way_left_mps``, stop 54). None otherwise: its slip measures the current."""
-        if self.ability.moves_sideways:
-            return (np.zeros(2) if self.sent_ned is None else self.sent_ned), 0.0
-        way = self.lags.way_left_mps if self.sheared else None
-        return None if way is None else (np.zeros(2), way)
-
     def _maneuver(self, m: Maneuver) -> Command:
         """Ahead (a positive speed over ground along the heading) goes as velocity only, which Rover reads the same way
         (heading: its direction, speed: its norm), as any vehicle that follows velocities; astern or 0 needs the yaw."""
         self.asked_heading = m.heading_rad
         return m.velocity_ned, (None if m.speed_mps > 0.0 else m.heading_rad)
-
-    def _line_current(self, c: np.ndarray | None, sigmas: float) -> np.ndarray | None:
-        """The current estimate ``c`` when it is clear of ``sigmas`` of its spread (and of ``CURRENT_MIN_MPS``)."""
-        return c if c is not None and float(np.hypot(*c)) >= max(CURRENT_MIN_MPS, sigmas * self.current_std) else None
-
-    def _current(self, current_ned: np.ndarray | None) -> np.ndarray | None:
-        return current_ned if self.cfg.command.current_compensation else None
 
     def _velocity(self, v: np.ndarray) -> Command:
         self.asked_heading = math.atan2(v[1], v[0]) if float(np.hypot(*v)) > 1e-9 else self.asked_heading

@@ -415,7 +415,8 @@ def test_in_sheared_water_the_holding_line_is_the_still_water_one_for_the_rest_o
     innovations beyond uniform water's), for the line from the boat to the goal, and it keeps that line when the
     shear is no longer seen. The capture search's model boat drifts on the estimate at the boat, except while the
     estimator sees shear there (stop 32); its capture search makes for the goal alone (stop 45)."""
-    from koopguide.guidance.helm import SHEARED_WEIGHT, Helm
+    from koopguide.guidance.boat_reading import SHEARED_WEIGHT
+    from koopguide.guidance.helm import Helm
 
     cfg = guidance_settings.load()
     p, heading, current = np.array([0.3, -0.2]), math.radians(150.0), np.array([0.04, 0.0])

@@ -147,7 +147,7 @@ def test_one_slip_after_a_gap_is_one_sample_not_sheared_water(gap_s, kick_mps):
     n = np.array([-math.sin(heading), math.cos(heading)])
     t += gap_s  # nothing measured (at the area's edge, or turning fast)
     est.update(t, c + kick_mps * n, heading, 0.0)  # the hull's sway as it leaves the wall
-    assert est.shear_weight < 0.5  # the helm's latch (helm.SHEARED_WEIGHT) stays open
+    assert est.shear_weight < 0.5  # the helm's latch (boat_reading.SHEARED_WEIGHT) stays open
     for _ in range(30):  # ... but 3 s of such slips are sheared water
         t += 0.1
         heading += 0.2
