@@ -39,6 +39,7 @@ LINE_DOING = "making for the line it can hold the goal on"  # near the goal, a b
 DRIFT_DOING = "drifting onto the goal on the current's line"  # near it, a boat that turns in place (law/maneuver.py)
 LINE_RADII = 2.0  # a boat that needs way makes for its holding line from this many turning radii out
 LINE_LEAVE = 1.25  # ... and goes back to following the field only beyond this many times that distance
+HEADING_GAP_S = 1.0  # through an attitude gap this long a boat that needs way keeps its last command [s]
 # how the boat came on station, for the arrival's log line (:meth:`Helm.on_station`; "": the usual way)
 OFF_LINE_HOW = " (sheared water, off its line: its way would stop it within the arrival radius)"
 
@@ -62,6 +63,7 @@ class Helm(BoatReading):
         self.in_company = False
         self.arrived = False  # the service has declared arrival (set by the supervisor each command)
         self.station_how = ""  # how the last on_station found the boat on station ("": the usual way)
+        self._kept: tuple[float, Command] | None = None  # (vehicle time, the last command made with a heading)
         self.reset()
 
     def reset(self) -> None:
@@ -71,6 +73,7 @@ class Helm(BoatReading):
         self.planner.reset()
         self.line.reset()
         self.line.capture.forget()  # the circle it was seen to turn on in the capture's manoeuvres
+        self._kept = None
 
     def probe(self, t: float, heading_rad: float | None, p_ned: np.ndarray | None = None) -> Command | None:
         """The turn probe's setpoint at the start of guiding (guidance/turn_probe.py), None once it is done."""
@@ -173,6 +176,8 @@ class Helm(BoatReading):
         astern (a boat that needs way: along the line it will hold, law/line_approach.py, its speed from the
         distance plus the station keeper's integral term ``bias_ned`` [m/s]). ``holding``: keeping station (a boat
         that turns in place keeps its hull on the current's line, law/maneuver.py)."""
+        if (kept := self._keeping(heading_rad)) is not None:
+            return kept
         if heading_rad is None or (self.in_company and self.ability.needs_way):
             # no attitude: all that can be sent is a velocity; among other boats the separation filter shapes a boat
             # that needs way's velocities (law/separation.py reads them as Rover does). A boat that turns in place goes
@@ -238,6 +243,8 @@ class Helm(BoatReading):
             return np.asarray(sp.velocity_ned, dtype=float), None
         if (probe := self.probe(self.t, heading_rad, p_ned) if self.t is not None else None) is not None:
             return probe
+        if (kept := self._keeping(heading_rad)) is not None:  # what it does goes on
+            return kept
         self.doing = "following the field"
         if within:
             # within the arrival radius, not yet holding its line (the supervisor has not arrived): still on the way; a
@@ -302,8 +309,21 @@ class Helm(BoatReading):
         """Ahead (a positive speed over ground along the heading) goes as velocity only, which Rover reads the same way
         (heading: its direction, speed: its norm), as any vehicle that follows velocities; astern or 0 needs the yaw."""
         self.asked_heading = m.heading_rad
-        return m.velocity_ned, (None if m.speed_mps > 0.0 else m.heading_rad)
+        command = m.velocity_ned, (None if m.speed_mps > 0.0 else m.heading_rad)
+        self._kept = None if self.t is None else (self.t, command)
+        return command
+
+    def _keeping(self, heading_rad: float | None) -> Command | None:
+        """On a tick without a heading (its attitude late), for up to ``HEADING_GAP_S``: the command with a heading a
+        boat that needs way was last given, its manoeuvre kept. Sent the field's velocity instead, it dropped its
+        capture search and planned approach; at the campaign's 10x speed, 3-16 ticks of a sheared rudder run found
+        the attitude 0.5 s old, each just after a capture search (22 ms here, more with two workers; stop 55)."""
+        if heading_rad is not None or self._kept is None or self.t is None or not self.ability.needs_way:
+            return None
+        t, command = self._kept
+        return command if self.t - t <= HEADING_GAP_S else None
 
     def _velocity(self, v: np.ndarray) -> Command:
+        self._kept = None
         self.asked_heading = math.atan2(v[1], v[0]) if float(np.hypot(*v)) > 1e-9 else self.asked_heading
         return v, None

@@ -325,7 +325,7 @@ def test_ahead_goes_as_velocity_only_and_astern_or_a_hold_with_the_yaw() -> None
     from koopguide.guidance.law.maneuver import Maneuver
 
     helm = Helm.__new__(Helm)  # only the conversion is exercised
-    helm.asked_heading = None
+    helm.asked_heading, helm.t = None, None
     v, yaw = helm._maneuver(Maneuver(0.5, 0.1, False))
     assert yaw is None and np.allclose(v, 0.1 * unit(0.5))
     v, yaw = helm._maneuver(Maneuver(0.5, -0.1, True))

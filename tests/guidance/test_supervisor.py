@@ -339,6 +339,36 @@ def test_a_boat_that_needs_way_does_not_arrive_on_a_tick_without_its_heading(zsh
     assert velocity_only.sup.vehicle.heading_at(velocity_only.t) is None and velocity_only.sup.arrived
 
 
+def test_a_boat_that_needs_way_keeps_its_manoeuvre_through_a_moment_without_its_heading(zshape_model: Path) -> None:
+    """A rudder boat in the capture search whose attitude comes late keeps the command it was last given with a
+    heading, its search, and what its status says it does, for up to ``HEADING_GAP_S`` (sent the field's velocity at
+    once, it dropped its search and planned approach: stop 55); past that, what can be sent without a heading goes,
+    and the search is dropped."""
+    from koopguide.guidance.helm import HEADING_GAP_S
+
+    bench = rudder_across_its_line(zshape_model)
+    helm, stale = bench.sup.helm, bench.cfg.failsafe.stale_after_s
+    bench.p = np.array([0.45, 0.0])
+    drift = (0.05, 0.0)  # carried north, away from the goal, out past the capture radius
+    headed = bench.fly(1.5, obey=False, current=drift)[-1]
+    t_headed = bench.t - DT
+    assert helm.line.capture.active and np.hypot(*bench.p) > bench.cfg.arrival.capture_radius_m
+    kept = past = 0
+    for _ in range(round((stale + HEADING_GAP_S + 0.5) / DT)):
+        t, with_heading = bench.t, bench.sup.vehicle.heading_at(bench.t) is not None
+        (d,) = bench.fly(DT, obey=False, current=drift, attitude=False)
+        if with_heading:
+            headed, t_headed = d, t
+        elif t - t_headed <= HEADING_GAP_S:
+            assert (d.velocity_ned, d.yaw_rad) == (headed.velocity_ned, headed.yaw_rad), (t, d, headed)
+            assert helm.line.capture.active and d.reason.split(",")[0] == headed.reason.split(",")[0], d.reason
+            kept += 1
+        else:
+            assert not helm.line.capture.active and d.velocity_ned != headed.velocity_ned
+            past += 1
+    assert kept >= round(0.8 * HEADING_GAP_S / DT) and past >= 5, (kept, past)
+
+
 def test_a_boat_that_starts_by_the_goal_arrives_only_once_the_probe_has_told_how_it_turns(zshape_model: Path) -> None:
     """Within the arrival radius from the start: a boat that turns in place (its bow follows the yaw it is sent)
     arrives once the turn probe has seen it turn; one that does not (a rudder boat without way) is then known to
