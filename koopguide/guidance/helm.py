@@ -316,12 +316,12 @@ class Helm(BoatReading):
     def _keeping(self, heading_rad: float | None) -> Command | None:
         """On a tick without a heading (its attitude late), for up to ``HEADING_GAP_S``: the command with a heading a
         boat that needs way was last given, its manoeuvre kept. Sent the field's velocity instead, it dropped its
-        capture search and planned approach; at the campaign's 10x speed, 3-16 ticks of a sheared rudder run found
+        capture search and planned approach; at the campaign's 10x speed, 2-16 ticks of a sheared rudder run found
         the attitude 0.5 s old, each just after a capture search (22 ms here, more with two workers; stop 55)."""
         if heading_rad is not None or self._kept is None or self.t is None or not self.ability.needs_way:
             return None
         t, command = self._kept
-        return command if self.t - t <= HEADING_GAP_S else None
+        return command if 0.0 <= self.t - t <= HEADING_GAP_S else None
 
     def _velocity(self, v: np.ndarray) -> Command:
         self._kept = None
