@@ -315,13 +315,17 @@ class Helm(BoatReading):
 
     def _keeping(self, heading_rad: float | None) -> Command | None:
         """On a tick without a heading (its attitude late), for up to ``HEADING_GAP_S``: the command with a heading a
-        boat that needs way was last given, its manoeuvre kept. Sent the field's velocity instead, it dropped its
-        capture search and planned approach; at the campaign's 10x speed, 2-16 ticks of a sheared rudder run found
-        the attitude 0.5 s old, each just after a capture search (22 ms here, more with two workers; stop 55)."""
-        if heading_rad is not None or self._kept is None or self.t is None or not self.ability.needs_way:
+        boat that needs way was last given, its manoeuvre kept, so long as it was the last to go out (not a hold or
+        another state's command since) and the boat is not in company (there it goes by velocity). Sent the field's
+        velocity instead, it dropped its capture search and planned approach; at the campaign's 10x speed, 2-16 ticks
+        of a sheared rudder run found the attitude 0.5 s old, each just after a capture search (stop 55)."""
+        if heading_rad is not None or self._kept is None or self.t is None:
+            return None
+        if self.in_company or not self.ability.needs_way:
             return None
         t, command = self._kept
-        return command if 0.0 <= self.t - t <= HEADING_GAP_S else None
+        last = self.sent_ned is not None and np.allclose(self.sent_ned, command[0], rtol=0.0, atol=1e-9)
+        return command if last and 0.0 <= self.t - t <= HEADING_GAP_S else None
 
     def _velocity(self, v: np.ndarray) -> Command:
         self._kept = None

@@ -339,6 +339,19 @@ def test_a_boat_that_needs_way_does_not_arrive_on_a_tick_without_its_heading(zsh
     assert velocity_only.sup.vehicle.heading_at(velocity_only.t) is None and velocity_only.sup.arrived
 
 
+NORTHWARD = (0.05, 0.0)  # a drift that carries a boat north of the goal away from it [m/s]
+
+
+def in_the_capture_search(zshape_model: Path):
+    """A rudder boat in its capture search just beyond the capture radius, carried north (``NORTHWARD``): the bench,
+    its last decision (made with a heading) and that decision's vehicle time."""
+    bench = rudder_across_its_line(zshape_model)
+    bench.p = np.array([0.47, 0.0])
+    headed = bench.fly(1.5, obey=False, current=NORTHWARD)[-1]
+    assert bench.sup.helm.line.capture.active and np.hypot(*bench.p) > bench.cfg.arrival.capture_radius_m
+    return bench, headed, bench.t - DT
+
+
 def test_a_boat_that_needs_way_keeps_its_manoeuvre_through_a_moment_without_its_heading(zshape_model: Path) -> None:
     """A rudder boat in the capture search whose attitude comes late keeps the command it was last given with a
     heading, its search, and what its status says it does, for up to ``HEADING_GAP_S`` (sent the field's velocity at
@@ -346,17 +359,12 @@ def test_a_boat_that_needs_way_keeps_its_manoeuvre_through_a_moment_without_its_
     and the search is dropped."""
     from koopguide.guidance.helm import HEADING_GAP_S
 
-    bench = rudder_across_its_line(zshape_model)
+    bench, headed, t_headed = in_the_capture_search(zshape_model)
     helm, stale = bench.sup.helm, bench.cfg.failsafe.stale_after_s
-    bench.p = np.array([0.45, 0.0])
-    drift = (0.05, 0.0)  # carried north, away from the goal, out past the capture radius
-    headed = bench.fly(1.5, obey=False, current=drift)[-1]
-    t_headed = bench.t - DT
-    assert helm.line.capture.active and np.hypot(*bench.p) > bench.cfg.arrival.capture_radius_m
     kept = past = 0
     for _ in range(round((stale + HEADING_GAP_S + 0.5) / DT)):
         t, with_heading = bench.t, bench.sup.vehicle.heading_at(bench.t) is not None
-        (d,) = bench.fly(DT, obey=False, current=drift, attitude=False)
+        (d,) = bench.fly(DT, obey=False, current=NORTHWARD, attitude=False)
         if with_heading:
             headed, t_headed = d, t
         elif t - t_headed <= HEADING_GAP_S:
@@ -367,6 +375,32 @@ def test_a_boat_that_needs_way_keeps_its_manoeuvre_through_a_moment_without_its_
             assert not helm.line.capture.active and d.velocity_ned != headed.velocity_ned
             past += 1
     assert kept >= round(0.8 * HEADING_GAP_S / DT) and past >= 5, (kept, past)
+
+
+def test_a_command_is_kept_through_a_missing_heading_only_if_it_was_the_last_to_go_out_and_not_in_company(
+    zshape_model: Path,
+) -> None:
+    """What a boat without its heading is not sent again: the manoeuvre from before a hold (no fixes for longer than
+    ``stale_after_s``, a zero velocity went out since), nor, once other boats are heard, anything but a velocity (in
+    company a boat that needs way goes by velocities, which the separation filter shapes)."""
+    from koopguide.guidance.events import NeighbourStatus
+
+    bench, headed, _ = in_the_capture_search(zshape_model)
+    stale = bench.cfg.failsafe.stale_after_s
+    for _ in range(round((stale + 0.1) / DT)):  # no fix, no attitude: the position goes stale, a hold
+        d = bench.tick()
+        bench.advance()
+    assert d.velocity_ned == (0.0, 0.0), d
+    (d,) = bench.fly(DT, obey=False, current=NORTHWARD, attitude=False)  # fixes again, the attitude still stale
+    assert bench.sup.vehicle.heading_at(bench.t - DT) is None
+    assert (d.velocity_ned, d.yaw_rad) != (headed.velocity_ned, headed.yaw_rad), d
+
+    bench, headed, _ = in_the_capture_search(zshape_model)
+    while bench.sup.vehicle.heading_at(bench.t) is not None:  # the last ticks with a heading, alone
+        (headed,) = bench.fly(DT, obey=False, current=NORTHWARD, attitude=False)
+    bench.sup.handle(NeighbourStatus(bench.wall, bench.t, "aaa", (9.0, 9.0), (0.0, 0.0), 0.0))  # now in company
+    (d,) = bench.fly(DT, obey=False, current=NORTHWARD, attitude=False)
+    assert bench.sup.helm.in_company and d.velocity_ned != headed.velocity_ned, d
 
 
 def test_a_boat_that_starts_by_the_goal_arrives_only_once_the_probe_has_told_how_it_turns(zshape_model: Path) -> None:
