@@ -39,8 +39,9 @@ class BoatReading:
         self.asked_heading: float | None = None  # the heading the last setpoint asked for [rad]
         self.sent_ned: np.ndarray | None = None  # the velocity last sent [m/s] (None: none went out)
         self.asked_mps: float | None = None  # speed over ground along the heading last sent (<0: astern; :meth:`sent`)
-        self.ability = TurnAbility()
-        self.lags = BoatLags(1.0 / STOP_GAIN, SPEED_LAG_S)
+        self.ability: TurnAbility
+        self.lags: BoatLags
+        BoatReading.reset(self)  # how it turns and stops (not self.reset: a subclass's reset needs its own parts)
 
     def reset(self) -> None:
         """A restarted vehicle (maybe another boat): forget how it turns and stops."""
