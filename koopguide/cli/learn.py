@@ -56,11 +56,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks that print figures (never timed tests)")
     p.add_argument(
         "what",
-        choices=["speed", "lasa", "sitl", "guidance", "missions", "soak", "separation"],
+        choices=["speed", "lasa", "sitl", "guidance", "missions", "soak", "separation", "capture"],
         help="speed: training and query speed; lasa: all LASA shapes, seeds, ablations and a report; "
         "sitl: simulator; guidance: service latency and CPU; missions: closed-loop campaign of vehicles x flows "
         "x starts; soak: hours of guidance at 50 Hz, memory and latency growth; separation: two-boat encounters "
-        "(head-on, crossing, overtaking) x vehicles x currents, the fleet's separation and arrival",
+        "(head-on, crossing, overtaking) x vehicles x currents, the fleet's separation and arrival; capture: the "
+        "cost of one capture search near the goal",
     )
     p.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the benchmark")
     p.set_defaults(run=cmd_bench)
@@ -236,6 +237,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from koopguide.harness import guidance_bench
 
         return guidance_bench.main(args.rest)
+    if args.what == "capture":
+        from koopguide.harness import capture_bench
+
+        return capture_bench.main(args.rest)
     if args.what == "lasa":
         from koopguide.harness.lasa_bench import main as lasa_main
 

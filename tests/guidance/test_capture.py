@@ -23,8 +23,10 @@ from koopguide.guidance.law.capture import (
     MANEUVERS,
     MAX_RADIUS_M,
     MIN_RADIUS_M,
+    SIM_DT_S,
     STEP_S,
     CaptureSearch,
+    straight_run,
 )
 from koopguide.guidance.law.line_approach import FERRY_RAD
 from koopguide.guidance.law.maneuver import unit, wrap_pi
@@ -177,6 +179,35 @@ def test_every_manoeuvre_is_finite_and_within_max_speed(n, e, heading, water, to
         STEP_S - 0.1, np.array([n, e]) + 0.1, np.zeros(2), heading + 1.0, -water, axis, current, radius, None
     )
     assert search.chosen == chosen  # held for its whole length
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    heading=st.floats(-math.pi, math.pi),
+    water=st.floats(-0.25, 0.25),
+    target=st.floats(-0.2, 0.2),
+    lag=st.floats(0.5, 4.0),
+    cn=st.floats(-0.08, 0.08),
+    ce=st.floats(-0.08, 0.08),
+    seconds=st.sampled_from([2.0, 3.0]),
+)
+def test_the_searchs_straight_runs_summed_in_closed_form_are_its_euler_steps(
+    heading, water, target, lag, cn, ce, seconds
+) -> None:
+    """The runs beyond the horizon (rudder amidships) are summed in closed form: the same boat, way and place as
+    stepping the model ``SIM_DT_S`` at a time (the way follows its target with the lag; the boat moves by the way
+    after each step along its heading, and by the current)."""
+    c = np.array([cn, ce])
+    pos, u = np.array([0.3, -0.2]), water
+    for _ in range(round(seconds / SIM_DT_S)):
+        u = u + (target - u) * (SIM_DT_S / lag)
+        pos = pos + (u * unit(heading) + c) * SIM_DT_S
+    got = straight_run(
+        np.array([[0.3, -0.2]]), np.array([heading]), np.array([water]), np.array([target]), np.array([lag]), c, seconds
+    )
+    assert (
+        np.allclose(got[0][0], pos, atol=1e-12) and got[1][0] == heading and math.isclose(got[2][0], u, abs_tol=1e-12)
+    )
 
 
 def test_a_hold_beside_the_line_short_of_arriving_gives_way_to_the_capture_search() -> None:

@@ -100,6 +100,28 @@ def entry_rad(axis_rad: float, current_ned: np.ndarray | None) -> float:
     return ENTRY_ASTERN_RAD if bow_downstream(axis_rad, current_ned) else ENTRY_RAD
 
 
+def straight_run(
+    pos: np.ndarray,
+    psi: np.ndarray,
+    u: np.ndarray,
+    target: np.ndarray,
+    lag_s: np.ndarray,
+    c: np.ndarray,
+    seconds: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The search's model boats ``(S,)`` (at ``pos`` ``(S, 2)`` [m], headings ``psi`` [rad], way ``u`` [m/s]) driven
+    for ``seconds`` with the rudder amidships toward the way ``target`` [m/s] through the water, lag ``lag_s`` [s], in
+    the current ``c`` ``(2,)`` [m/s]: the search's Euler steps of ``SIM_DT_S`` summed in closed form. The heading
+    stays; the way after k steps is u_k = target + (u - target) r^k with r = 1 - SIM_DT_S / lag, and each step moves
+    the boat by u_k SIM_DT_S along it. Returns (pos, psi, u) after the run."""
+    steps = round(seconds / SIM_DT_S)
+    r = 1.0 - SIM_DT_S / lag_s
+    rk = r**steps
+    way = SIM_DT_S * (steps * target + (u - target) * r * (1.0 - rk) / (1.0 - r))  # [m]
+    moved = way[:, None] * np.stack([np.cos(psi), np.sin(psi)], axis=1) + (steps * SIM_DT_S) * c
+    return pos + moved, psi, target + (u - target) * rk
+
+
 class CaptureSearch:
     """Call :meth:`command` each tick while capturing; :meth:`reset` when the boat holds or leaves the zone."""
 
@@ -119,12 +141,6 @@ class CaptureSearch:
         self.circle_speed_mps: float | None = None  # the speed the circle it is given was measured at (the caller's)
         self._way_m = 0.0  # way made through the water in the manoeuvre under way [m]
         self._t: float | None = None  # the last command's vehicle time [s]
-        seqs = np.array(list(itertools.product(range(len(MANEUVERS)), repeat=HORIZON)))  # (S, HORIZON)
-        table = np.array(MANEUVERS, dtype=float)
-        self._direction = table[seqs, 0]  # (S, HORIZON)
-        self._rudder = table[seqs, 1]
-        self._first = seqs[:, 0]
-        self._ahead = np.flatnonzero(~(self._direction < 0.0).any(axis=1))  # the sequences with no leg astern
 
     def reset(self) -> None:
         self.chosen, self.until, self._t = None, None, None
@@ -213,35 +229,34 @@ class CaptureSearch:
         outside: Callable[[np.ndarray], np.ndarray] | None,
     ) -> int:
         """Index into ``MANEUVERS`` of the first manoeuvre of the best-scoring sequence (``c``: the current, zeros
-        in still water)."""
-        rows = slice(None) if self.astern else self._ahead  # a boat that goes ahead only: no sequence astern
-        ways, rudders, firsts = self._direction[rows], self._rudder[rows], self._first[rows]
-        n_seq = len(firsts)
+        in still water). The sequences are searched as a tree: the boat is driven through each manoeuvre once per
+        distinct beginning (7 + 49 + 343 + 2401 manoeuvres, not 4 x 2401), and the straight runs that score each
+        end beyond the horizon are summed in closed form (they keep their heading). Ties go to the first sequence in
+        ``itertools.product`` order."""
+        moves = [i for i, (d, _) in enumerate(MANEUVERS) if self.astern or d >= 0]  # ahead only: none astern
+        table = np.array([MANEUVERS[i] for i in moves], dtype=float)
+        n_moves = len(moves)
         speed = self.speed(c)
         radius = self.model_radius_m(radius_m, speed)
-        p0 = np.asarray(p_ned, dtype=float)
-        pos = np.tile(p0 - np.asarray(goal_ned, dtype=float), (n_seq, 1))  # (S, 2) from the goal [m]
-        psi = np.full(n_seq, heading_rad)
-        u = np.full(n_seq, water_mps)  # through the water along the heading [m/s]
         a = unit(axis_rad)
         normal = np.array([-a[1], a[0]])
         upstream = math.atan2(-c[1], -c[0]) if float(np.hypot(*c)) > 0.0 else None
-        score = np.full(n_seq, np.inf)
-        strayed = np.zeros(n_seq)  # the farthest out of the area at a manoeuvre's end [m]
+        ahead, astern = (max(SPEED_LAG_S, lag) for lag in self.lags_s)
 
         def ground(psi, u):  # the velocity over ground (S, 2) of way u along headings psi, carried by the current
             return u[:, None] * np.stack([np.cos(psi), np.sin(psi)], axis=1) + c
 
-        ahead, astern = (max(SPEED_LAG_S, lag) for lag in self.lags_s)
-
         def at_rest(psi):  # the way (S,) speed 0 asks through the water: none, or holding the ground along psi
             if not self.holds_at_rest:
-                return np.zeros(n_seq)
+                return np.zeros(len(psi))
             hold = -(c[0] * np.cos(psi) + c[1] * np.sin(psi))
             return hold if self.astern else np.maximum(hold, 0.0)
 
+        def lag_of(target):
+            return np.where(target > 0.0, ahead, np.where(target < 0.0, astern, SPEED_LAG_S))
+
         def drive(pos, psi, u, target, rudder, seconds):  # the model over ``seconds``: Euler steps of SIM_DT_S
-            lag = np.where(target > 0.0, ahead, np.where(target < 0.0, astern, SPEED_LAG_S))
+            lag = lag_of(target)
             for _ in range(round(seconds / SIM_DT_S)):
                 u = u + (target - u) * (SIM_DT_S / lag)
                 psi = psi + rudder * np.abs(u) / radius * SIM_DT_S  # Rover turns toward the asked heading
@@ -258,7 +273,7 @@ class CaptureSearch:
                 return cost + (np.hypot(pos[:, 0], pos[:, 1]) / ALONG_SCALE_M) ** 2
             off_axis = np.abs(wrap_pi(psi - axis_rad))
             downstream = (
-                np.zeros(n_seq, dtype=bool) if upstream is None else np.abs(wrap_pi(psi - upstream)) > math.pi / 2
+                np.zeros(len(psi), dtype=bool) if upstream is None else np.abs(wrap_pi(psi - upstream)) > math.pi / 2
             )
             heading_scale = np.where(downstream, ENTRY_ASTERN_RAD, HEADING_SCALE_RAD)  # the hold's entry, either end
             return (
@@ -269,9 +284,16 @@ class CaptureSearch:
                 + ASTERN_END_COST * downstream
             )
 
+        # level k holds one state per distinct beginning of k + 1 manoeuvres, in product order (parent-major)
+        pos = (np.asarray(p_ned, dtype=float) - np.asarray(goal_ned, dtype=float))[None, :]  # from the goal [m]
+        psi, u = np.array([heading_rad]), np.array([water_mps])
+        score, strayed = np.full(1, np.inf), np.zeros(1)  # per beginning: best pose so far, farthest out of the area
         for k in range(HORIZON):
-            target = np.where(ways[:, k] == 0.0, at_rest(psi), ways[:, k] * speed)  # (a drift keeps its heading)
-            pos, psi, u = drive(pos, psi, u, target, rudders[:, k], STEP_S)
+            pos, psi, u = (np.repeat(x, n_moves, axis=0) for x in (pos, psi, u))
+            score, strayed = np.repeat(score, n_moves), np.repeat(strayed, n_moves)
+            ways, rudders = np.tile(table[:, 0], len(psi) // n_moves), np.tile(table[:, 1], len(psi) // n_moves)
+            target = np.where(ways == 0.0, at_rest(psi), ways * speed)  # (a drift keeps its heading)
+            pos, psi, u = drive(pos, psi, u, target, rudders, STEP_S)
             if outside is not None:
                 strayed = np.maximum(strayed, np.asarray(outside(pos + goal_ned), dtype=float))
             score = np.minimum(score, pose_cost(pos, psi, u, k))  # the best pose along the sequence
@@ -279,8 +301,10 @@ class CaptureSearch:
         # credits a pose aimed at the line (a boat 0.2 m beside its line otherwise found no sequence of four that
         # got there, and drifted beside it for a minute: every turn toward the line scored worse than none)
         for direction in (1.0, -1.0) if self.astern else (1.0,):
-            on = drive(pos, psi, u, np.full(n_seq, direction * speed), np.zeros(n_seq), CONTINUE_S)
-            on = drive(*on, at_rest(on[1]), np.zeros(n_seq), STEP_S)
+            target = np.full(len(psi), direction * speed)
+            on = straight_run(pos, psi, u, target, lag_of(target), c, CONTINUE_S)
+            target = at_rest(on[1])
+            on = straight_run(*on, target, lag_of(target), c, STEP_S)
             score = np.minimum(score, pose_cost(*on, HORIZON + 1))
         total = score + AREA_COST_PER_M * strayed  # out of the area already: back in first
-        return int(firsts[int(np.argmin(total))])
+        return moves[int(np.argmin(total)) // n_moves ** (HORIZON - 1)]
