@@ -196,6 +196,7 @@ class Helm(BoatReading):
             slow_to_turn=self.cfg.command.turn_slowdown,
             holding=holding,
             allow_astern=self.lags.sternway.able,
+            t=self.t,
         )
         self.doing = DRIFT_DOING if self.planner.drifting and not holding else self.doing
         return self._maneuver(m)

@@ -25,6 +25,7 @@ from koopguide.guidance.law.edge_reversal import EDGE_LEG_M
 from koopguide.guidance.law.line_approach import LineApproach
 from koopguide.guidance.law.maneuver import (
     ASTERN_RAD,
+    CHASE_S,
     DRIFT_ENTER,
     DRIFT_LEAVE,
     HOLDING_ASTERN_RAD,
@@ -644,3 +645,42 @@ def test_a_boat_that_goes_ahead_only_is_never_sent_astern_by_the_line_approach(
         m = line.command(p, goal, heading, radius_m=None, current_ned=current, outside=edge)
         if current is None:
             assert not m.astern and m.speed_mps >= 0.0
+
+
+def pivot_after(planner: ManeuverPlanner, target_rate_degps: float, seconds: float) -> tuple[list[bool], list[float]]:
+    """A boat that pivots at 7 deg/s toward the heading it is sent, from north, sent toward a point whose bearing
+    starts 80 deg to starboard and turns at ``target_rate_degps`` (a current carries the boat round its goal): the
+    planner's ahead/astern choices and the heading errors, tick by tick (0.2 s)."""
+    rate, dt, heading = math.radians(7.0), 0.2, 0.0
+    asterns, errors = [], []
+    for k in range(round(seconds / dt)):
+        t = k * dt
+        wanted = 0.2 * unit(math.radians(80.0 + target_rate_degps * t))
+        m = planner.plan(wanted, heading, None, pivoting(), distance_m=0.45, t=t)
+        error = wrap_pi(m.heading_rad - heading)
+        heading = wrap_pi(heading + math.copysign(min(abs(error), rate * dt), error))
+        asterns.append(m.astern)
+        errors.append(abs(error))
+    return asterns, errors
+
+
+def test_a_boat_that_turns_in_place_chasing_a_heading_that_turns_as_fast_takes_the_other_end_to_meet_it() -> None:
+    """The bearing of the goal turns as fast as the boat pivots (stop 56: a diff-thrust boat carried round its goal by
+    the double gyre chased it for a minute): after CHASE_S the other end of the line, turning the other way, meets
+    it."""
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=FERRY_RAD)
+    asterns, errors = pivot_after(planner, 7.0, 30.0)
+    assert not any(asterns[: round(CHASE_S / 0.2)])  # ahead first: 80 deg off
+    assert min(errors[: round(CHASE_S / 0.2)]) > math.radians(75.0)  # and never closing on it
+    assert any(asterns)
+    met = next(i for i, e in enumerate(errors) if e < math.radians(5.0)) * 0.2
+    assert met < 2.0 * CHASE_S  # astern, turning to port toward a heading that turns to starboard
+
+
+@pytest.mark.parametrize("target_rate_degps", [0.0, 3.0, -3.0])
+def test_a_turn_in_place_that_closes_on_its_heading_keeps_its_end(target_rate_degps: float) -> None:
+    """A still heading, or one turning slower than the boat: the boat closes on it ahead, as it began."""
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=FERRY_RAD)
+    asterns, errors = pivot_after(planner, target_rate_degps, 40.0)
+    assert not any(asterns)
+    assert errors[-1] < math.radians(1.0)

@@ -61,6 +61,13 @@ TURNING_RAD = math.radians(15.0)  # a heading error this large is a turn (for th
 # instead, in 3 of 23 flights beside two busy processes (arrived after 71.4 s)
 DRIFT_ENTER, DRIFT_LEAVE = 0.5, 0.7
 CIRCLE_MARGIN = 0.7  # fraction of the geometric speed cap used (the turn rate is an estimate)
+# a boat that turns in place chasing a heading that turns as fast: once it has turned CHASE_TURNED_RAD in CHASE_S
+# without closing on the heading by CHASE_CLOSE_RAD, it takes the other end (ahead <-> astern) for CHASE_S, turning
+# the other way to meet the heading
+CHASE_S = 8.0  # [s]
+CHASE_ERROR_RAD = math.radians(60.0)  # ... while it pivots this far off it (Rover's WP_PIVOT_ANGLE; under, it drives)
+CHASE_TURNED_RAD = math.radians(30.0)
+CHASE_CLOSE_RAD = math.radians(15.0)
 # the smallest speed sent while steering (exactly 0 would be Rover's stop controller), and the current estimate
 # below which there is no current: the law's own (law/command.py), one value each for both
 MIN_SPEED_MPS = CRAB_MIN_SPEED_MPS
@@ -133,9 +140,12 @@ class ManeuverPlanner:
         self.ferry = ferry_rad
         self.astern = False
         self.drifting = False  # making for a point at nearly the current's own velocity: on its line
+        self._turn: tuple[float, float, float, bool] | None = None  # (t, heading, |error|, astern) as a turn began
+        self._end_until: float | None = None  # vehicle time until which the end a chase chose is kept [s]
 
     def reset(self) -> None:
         self.astern = self.drifting = False
+        self._turn = self._end_until = None
 
     def plan(
         self,
@@ -147,6 +157,7 @@ class ManeuverPlanner:
         allow_astern: bool = True,
         slow_to_turn: bool = True,
         holding: bool = False,
+        t: float | None = None,
     ) -> Maneuver:
         """The command that moves the boat over ground at ``v_ground`` [m/s] from ``heading_rad``.
 
@@ -154,6 +165,8 @@ class ManeuverPlanner:
         so that its turning circle reaches the point (``slow_to_turn`` False: no slowing at all); a boat that
         needs way keeps ``way_mps`` while it turns. ``holding``: keeping station (in a current: on its line); a boat
         that turns in place making for a point at nearly the current's velocity drifts onto it on that line too.
+        ``t`` (vehicle time [s]; None: not watched) watches a boat that turns in place making for a point (not on the
+        current's line) for a chase (:meth:`_chasing`).
         """
         v = np.asarray(v_ground, dtype=float)
         c = water_current(current_ned)
@@ -173,8 +186,13 @@ class ManeuverPlanner:
         else:
             ahead, flip = math.atan2(w[1], w[0]), ASTERN_RAD
         error_ahead = wrap_pi(ahead - heading_rad)
+        chase_watched = t is not None and ferry is None and not ability.needs_way and allow_astern  # making for a point
+        if not chase_watched:
+            self._turn = self._end_until = None
         if not allow_astern:
             self.astern = False
+        elif chase_watched and self._end_until is not None and 0.0 <= self._end_until - t <= CHASE_S:
+            pass  # the end a chase chose (below), kept whichever is nearer
         elif self.astern:
             self.astern = abs(wrap_pi(error_ahead + math.pi)) <= flip
         else:
@@ -182,6 +200,11 @@ class ManeuverPlanner:
         ahead = ahead if ferry is None else ahead + ferry  # the hull's line turned off the current's, either end
         h = wrap_pi(ahead + math.pi) if self.astern else wrap_pi(ahead)
         error = wrap_pi(h - heading_rad)
+        if chase_watched and self._chasing(t, heading_rad, abs(error)):
+            self.astern = not self.astern  # the other end of the heading's line: turning the other way, to meet it
+            self._end_until = t + CHASE_S
+            h = wrap_pi(h + math.pi)
+            error = wrap_pi(h - heading_rad)
         s = float(v @ np.array([math.cos(h), math.sin(h)]))  # ground speed along the heading (signed)
         # the sign of s is that of the ground motion along the heading: it can differ from ahead/astern (through
         # the water) when the boat is to drift back slower than the current carries it
@@ -198,3 +221,27 @@ class ManeuverPlanner:
                 size = min(size, CIRCLE_MARGIN * ability.turn_rate * distance_m / (2.0 * abs(math.sin(error))))
             size = max(size, MIN_SPEED_MPS)
         return Maneuver(h, sign * min(size, self.max_speed), self.astern)
+
+    def _chasing(self, t: float, heading_rad: float, error_rad: float) -> bool:
+        """Whether a boat that turns in place, ``error_rad`` [rad] off the heading it is sent, has been chasing it: in
+        the last ``CHASE_S`` it turned by ``CHASE_TURNED_RAD`` or more and closed on it by less than
+        ``CHASE_CLOSE_RAD``. Making for the goal while a current carries it round it (the double gyre by the campaign's
+        goal: 0.05 m/s across at 0.45 m, 6 deg/s of bearing), the heading it is sent turns as fast as the boat pivots,
+        which never catches it and is carried round for a minute and more (diff_thrust, the default campaign's double
+        gyre start 2: 3 of 10 flights did not arrive within 120 s, 4 of 10 took 103 s; stop 56); the other end of the
+        line, turning the other way, meets it. A turn is watched while the boat pivots (``CHASE_ERROR_RAD`` or more off
+        the heading) on the same end: driving past its goal under that, its bearing turns as the boat comes round to it
+        (a flip there sent the diff_thrust boat of the default campaign's double gyre start 3 on a 160 deg pivot)."""
+        turn = self._turn
+        if error_rad < CHASE_ERROR_RAD:
+            self._turn = None
+            return False
+        if turn is None or turn[3] != self.astern or t < turn[0]:
+            self._turn = (t, heading_rad, error_rad, self.astern)
+            return False
+        if t - turn[0] < CHASE_S:
+            return False
+        turned = abs(wrap_pi(heading_rad - turn[1]))
+        chased = turned >= CHASE_TURNED_RAD and turn[2] - error_rad < CHASE_CLOSE_RAD
+        self._turn = None if chased else (t, heading_rad, error_rad, self.astern)  # the next window from here
+        return chased
