@@ -35,11 +35,12 @@ def time_searches(n: int, astern: bool, seed: int) -> np.ndarray:
     for i in range(n):
         r, bearing = CAPTURE_M * math.sqrt(rng.random()), rng.uniform(-math.pi, math.pi)
         p = r * np.array([math.cos(bearing), math.sin(bearing)])
-        c = rng.uniform(0.0, 0.06) * np.array([math.cos(b := rng.uniform(-math.pi, math.pi)), math.sin(b)])
-        args = (rng.uniform(-math.pi, math.pi), rng.uniform(-0.1, 0.2), rng.uniform(-math.pi, math.pi))
+        c_speed, c_toward = rng.uniform(0.0, 0.06), rng.uniform(-math.pi, math.pi)
+        c = c_speed * np.array([math.cos(c_toward), math.sin(c_toward)])
+        heading, water, axis = rng.uniform(-math.pi, math.pi), rng.uniform(-0.1, 0.2), rng.uniform(-math.pi, math.pi)
         radius, outside = rng.uniform(0.8, 2.0), (_edge if i % 2 else None)
         start = time.perf_counter()
-        search.best(p, np.zeros(2), args[0], args[1], args[2], c, radius, outside)
+        search.best(p, np.zeros(2), heading, water, axis, c, radius, outside)
         times[i] = 1000.0 * (time.perf_counter() - start)
     return times
 

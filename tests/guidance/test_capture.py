@@ -206,7 +206,9 @@ def test_the_searchs_straight_runs_summed_in_closed_form_are_its_euler_steps(
         np.array([[0.3, -0.2]]), np.array([heading]), np.array([water]), np.array([target]), np.array([lag]), c, seconds
     )
     assert (
-        np.allclose(got[0][0], pos, atol=1e-12) and got[1][0] == heading and math.isclose(got[2][0], u, abs_tol=1e-12)
+        np.allclose(got[0][0], pos, rtol=0.0, atol=1e-12)
+        and got[1][0] == heading
+        and math.isclose(got[2][0], u, abs_tol=1e-12)
     )
 
 

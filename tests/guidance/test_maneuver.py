@@ -684,3 +684,24 @@ def test_a_turn_in_place_that_closes_on_its_heading_keeps_its_end(target_rate_de
     asterns, errors = pivot_after(planner, target_rate_degps, 40.0)
     assert not any(asterns)
     assert errors[-1] < math.radians(1.0)
+
+
+def test_a_turn_watched_again_after_a_gap_is_judged_afresh() -> None:
+    """A command without the planner (a hold, a tick without a heading) leaves a gap: the turn before it is no chase
+    (one call 80 deg off, then 20 s later 60 deg further round and still 80 deg off: no flip on that tick)."""
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=FERRY_RAD)
+    assert not planner.plan(0.2 * unit(math.radians(80.0)), 0.0, None, pivoting(), distance_m=0.45, t=0.0).astern
+    later = planner.plan(0.2 * unit(math.radians(140.0)), math.radians(60.0), None, pivoting(), distance_m=0.45, t=20.0)
+    assert not later.astern
+
+
+def test_keeping_station_no_chase_is_watched() -> None:
+    """Holding station (here in still water, where no current's line is held) the chase is not watched: the bearing
+    that turns as fast as the boat pivots keeps its end (ahead)."""
+    planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=FERRY_RAD)
+    rate, dt, heading = math.radians(7.0), 0.2, 0.0
+    for k in range(150):
+        wanted = 0.2 * unit(math.radians(80.0 + 7.0 * k * dt))
+        m = planner.plan(wanted, heading, None, pivoting(), distance_m=0.1, holding=True, t=k * dt)
+        assert not m.astern
+        heading = wrap_pi(heading + math.copysign(min(abs(wrap_pi(m.heading_rad - heading)), rate * dt), 1.0))

@@ -68,6 +68,7 @@ CHASE_S = 8.0  # [s]
 CHASE_ERROR_RAD = math.radians(60.0)  # ... while it pivots this far off it (Rover's WP_PIVOT_ANGLE; under, it drives)
 CHASE_TURNED_RAD = math.radians(30.0)
 CHASE_CLOSE_RAD = math.radians(15.0)
+CHASE_GAP_S = 1.0  # a turn not watched for this long (no command with a heading, a hold) is watched afresh [s]
 # the smallest speed sent while steering (exactly 0 would be Rover's stop controller), and the current estimate
 # below which there is no current: the law's own (law/command.py), one value each for both
 MIN_SPEED_MPS = CRAB_MIN_SPEED_MPS
@@ -142,10 +143,11 @@ class ManeuverPlanner:
         self.drifting = False  # making for a point at nearly the current's own velocity: on its line
         self._turn: tuple[float, float, float, bool] | None = None  # (t, heading, |error|, astern) as a turn began
         self._end_until: float | None = None  # vehicle time until which the end a chase chose is kept [s]
+        self._watched_t: float | None = None  # the last vehicle time the chase was watched [s]
 
     def reset(self) -> None:
         self.astern = self.drifting = False
-        self._turn = self._end_until = None
+        self._turn = self._end_until = self._watched_t = None
 
     def plan(
         self,
@@ -165,8 +167,8 @@ class ManeuverPlanner:
         so that its turning circle reaches the point (``slow_to_turn`` False: no slowing at all); a boat that
         needs way keeps ``way_mps`` while it turns. ``holding``: keeping station (in a current: on its line); a boat
         that turns in place making for a point at nearly the current's velocity drifts onto it on that line too.
-        ``t`` (vehicle time [s]; None: not watched) watches a boat that turns in place making for a point (not on the
-        current's line) for a chase (:meth:`_chasing`).
+        ``t`` (vehicle time [s]; None: not watched) watches a boat that turns in place making for a point (not holding
+        station, nor on the current's line) for a chase (:meth:`_chasing`).
         """
         v = np.asarray(v_ground, dtype=float)
         c = water_current(current_ned)
@@ -186,13 +188,16 @@ class ManeuverPlanner:
         else:
             ahead, flip = math.atan2(w[1], w[0]), ASTERN_RAD
         error_ahead = wrap_pi(ahead - heading_rad)
-        chase_watched = t is not None and ferry is None and not ability.needs_way and allow_astern  # making for a point
-        if not chase_watched:
+        # a boat that turns in place making for a point (not holding station, nor on the current's line) is watched
+        now = t if t is not None and ferry is None and not holding and not ability.needs_way and allow_astern else None
+        if now is None:
             self._turn = self._end_until = None
+        end_error = abs(wrap_pi(error_ahead + math.pi)) if self.astern else abs(error_ahead)
+        kept = now is not None and self._end_until is not None and 0.0 <= self._end_until - now <= CHASE_S
         if not allow_astern:
             self.astern = False
-        elif chase_watched and self._end_until is not None and 0.0 <= self._end_until - t <= CHASE_S:
-            pass  # the end a chase chose (below), kept whichever is nearer
+        elif kept and end_error <= ASTERN_RAD:
+            pass  # the end a chase chose (below), kept for CHASE_S though the other is nearer (not past ASTERN_RAD)
         elif self.astern:
             self.astern = abs(wrap_pi(error_ahead + math.pi)) <= flip
         else:
@@ -200,9 +205,9 @@ class ManeuverPlanner:
         ahead = ahead if ferry is None else ahead + ferry  # the hull's line turned off the current's, either end
         h = wrap_pi(ahead + math.pi) if self.astern else wrap_pi(ahead)
         error = wrap_pi(h - heading_rad)
-        if chase_watched and self._chasing(t, heading_rad, abs(error)):
+        if now is not None and self._chasing(now, heading_rad, abs(error)):
             self.astern = not self.astern  # the other end of the heading's line: turning the other way, to meet it
-            self._end_until = t + CHASE_S
+            self._end_until = now + CHASE_S
             h = wrap_pi(h + math.pi)
             error = wrap_pi(h - heading_rad)
         s = float(v @ np.array([math.cos(h), math.sin(h)]))  # ground speed along the heading (signed)
@@ -231,12 +236,17 @@ class ManeuverPlanner:
         gyre start 2: 3 of 10 flights did not arrive within 120 s, 4 of 10 took 103 s; stop 56); the other end of the
         line, turning the other way, meets it. A turn is watched while the boat pivots (``CHASE_ERROR_RAD`` or more off
         the heading) on the same end: driving past its goal under that, its bearing turns as the boat comes round to it
-        (a flip there sent the diff_thrust boat of the default campaign's double gyre start 3 on a 160 deg pivot)."""
+        (a flip there sent the diff_thrust boat of the default campaign's double gyre start 3 on a 160 deg pivot), and
+        afresh after ``CHASE_GAP_S`` unwatched. A heading that turns faster than the boat pivots is chased either way:
+        the boat then flips every ``CHASE_S`` or so, and stays within a few degrees of it."""
+        last, self._watched_t = self._watched_t, t
+        if last is None or not 0.0 <= t - last <= CHASE_GAP_S:
+            self._turn = None
         turn = self._turn
         if error_rad < CHASE_ERROR_RAD:
             self._turn = None
             return False
-        if turn is None or turn[3] != self.astern or t < turn[0]:
+        if turn is None or turn[3] != self.astern:
             self._turn = (t, heading_rad, error_rad, self.astern)
             return False
         if t - turn[0] < CHASE_S:
