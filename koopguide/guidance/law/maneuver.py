@@ -233,7 +233,7 @@ class ManeuverPlanner:
         ``CHASE_CLOSE_RAD``. Making for the goal while a current carries it round it (the double gyre by the campaign's
         goal: 0.05 m/s across at 0.45 m, 6 deg/s of bearing), the heading it is sent turns as fast as the boat pivots,
         which never catches it and is carried round for a minute and more (diff_thrust, the default campaign's double
-        gyre start 2: 3 of 10 flights did not arrive within 120 s, 4 of 10 took 103 s; stop 56); the other end of the
+        gyre start 2: 2 of 10 flights did not arrive within 120 s, 4 of 10 took 103 s; stop 56); the other end of the
         line, turning the other way, meets it. A turn is watched while the boat pivots (``CHASE_ERROR_RAD`` or more off
         the heading) on the same end: driving past its goal under that, its bearing turns as the boat comes round to it
         (a flip there sent the diff_thrust boat of the default campaign's double gyre start 3 on a 160 deg pivot), and
