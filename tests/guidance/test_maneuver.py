@@ -647,16 +647,19 @@ def test_a_boat_that_goes_ahead_only_is_never_sent_astern_by_the_line_approach(
             assert not m.astern and m.speed_mps >= 0.0
 
 
-def pivot_after(planner: ManeuverPlanner, target_rate_degps: float, seconds: float) -> tuple[list[bool], list[float]]:
+def pivot_after(
+    planner: ManeuverPlanner, target_rate_degps: float, seconds: float, holding: bool = False
+) -> tuple[list[bool], list[float]]:
     """A boat that pivots at 7 deg/s toward the heading it is sent, from north, sent toward a point whose bearing
-    starts 80 deg to starboard and turns at ``target_rate_degps`` (a current carries the boat round its goal): the
-    planner's ahead/astern choices and the heading errors, tick by tick (0.2 s)."""
+    starts 80 deg to starboard and turns at ``target_rate_degps`` (a current carries the boat round its goal), making
+    for it or (``holding``) keeping station: the planner's ahead/astern choices and the heading errors, tick by tick
+    (0.2 s)."""
     rate, dt, heading = math.radians(7.0), 0.2, 0.0
     asterns, errors = [], []
     for k in range(round(seconds / dt)):
         t = k * dt
         wanted = 0.2 * unit(math.radians(80.0 + target_rate_degps * t))
-        m = planner.plan(wanted, heading, None, pivoting(), distance_m=0.45, t=t)
+        m = planner.plan(wanted, heading, None, pivoting(), distance_m=0.45, holding=holding, t=t)
         error = wrap_pi(m.heading_rad - heading)
         heading = wrap_pi(heading + math.copysign(min(abs(error), rate * dt), error))
         asterns.append(m.astern)
@@ -699,9 +702,5 @@ def test_keeping_station_no_chase_is_watched() -> None:
     """Holding station (here in still water, where no current's line is held) the chase is not watched: the bearing
     that turns as fast as the boat pivots keeps its end (ahead)."""
     planner = ManeuverPlanner(max_speed_mps=0.3, way_mps=0.15, ferry_rad=FERRY_RAD)
-    rate, dt, heading = math.radians(7.0), 0.2, 0.0
-    for k in range(150):
-        wanted = 0.2 * unit(math.radians(80.0 + 7.0 * k * dt))
-        m = planner.plan(wanted, heading, None, pivoting(), distance_m=0.1, holding=True, t=k * dt)
-        assert not m.astern
-        heading = wrap_pi(heading + math.copysign(min(abs(wrap_pi(m.heading_rad - heading)), rate * dt), 1.0))
+    asterns, _ = pivot_after(planner, 7.0, 30.0, holding=True)
+    assert not any(asterns)
