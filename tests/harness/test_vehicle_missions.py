@@ -19,7 +19,7 @@ import pytest
 from koopguide.base import data
 from koopguide.guidance.settings import GuidanceConfig
 from koopguide.harness import mission
-from tests.support import kinematic_rudder, velocity_follower
+from tests.support import kinematic_rudder, kinematic_skid, velocity_follower
 
 pytestmark = pytest.mark.flight  # closed-loop flights: `make test` runs them on two workers (pyproject.toml)
 
@@ -155,6 +155,20 @@ def test_a_vehicle_whose_velocity_through_the_water_follows_the_setpoint_arrives
     velocity_follower.install(monkeypatch, heading=heading)
     cfg, result = fly_from_demo_start(zshape_model, 3, toward, f"follow{heading[0]}{toward}", {"vehicle": "vectored"})
     assert_arrives_and_holds(cfg, result, f"velocity follower (heading {heading}), current toward {toward}")
+
+
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize(("start", "toward", "stops_at_zero"), [(2, "E", False), (5, "S", True)])
+def test_a_kinematic_skid_steer_boat_that_pivots_on_guided_targets_arrives_and_keeps_station(
+    zshape_model: Path, monkeypatch: pytest.MonkeyPatch, start: int, toward: str, stops_at_zero: bool
+) -> None:
+    """Issue 10's second vehicle, independent of the simulator's hulls (tests/support/kinematic_skid.py): heading
+    plus speed over ground, and pivot turns beyond 60 deg on guided targets too (the simulator's boat, as Rover's
+    source, pivots only in waypoint navigation), with or without Rover's stop controller. From the 7 Zshape demo
+    starts x 4 currents: 28 of 28 either way (stop 57)."""
+    kinematic_skid.install(monkeypatch, stops_at_zero=stops_at_zero)
+    cfg, result = fly_from_demo_start(zshape_model, start, toward, f"kskid{toward}", {"vehicle": "diff_thrust"})
+    assert_arrives_and_holds(cfg, result, f"kinematic skid steer (stop controller {stops_at_zero}), toward {toward}")
 
 
 @pytest.mark.timeout(180)
