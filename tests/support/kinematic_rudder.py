@@ -8,25 +8,17 @@ first-order lag ``tau_s`` (at most ``ahead_mps`` ahead, ``astern_mps`` astern); 
 asked at ``k_per_s`` times the error, but never faster than ``|u| / radius_m`` (no turn without way through the
 water, a turning circle of ``radius_m`` at any speed); no sway, no hull dynamics. ``astern_mps`` 0 is a thruster
 that does not reverse; ``stops_at_zero`` gives it Rover's stop controller after all (asked 0, throttle off: it
-drifts). It reads a guided target as Rover does (sitl.guided: heading and signed speed); outside GUIDED, disarmed
-or without a target it is asked nothing and drifts.
-
-It replaces the simulator's boat physics (``sitl.boat.Boat.physics_step``) for the duration of a test; the rest
-is the real thing (the simulated autopilot's modes and setpoint rules, sensors, MAVLink over loopback, the real
-service).
-
-Conventions: NED [m], [m/s], headings [rad] from north; the boat state's body velocities are through the water.
+drifts). The hull, its lag and how it reads a guided target: tests/support/kinematic_hull.py.
 """
 
 from __future__ import annotations
 
-import math
-
 import pytest
 
 from sitl import boat as sim_boat
+from sitl.guided import GuidedTarget
 from sitl.sensors import wrap_pi
-from tests.support.velocity_follower import asked_target, settle
+from tests.support import kinematic_hull
 
 
 def install(
@@ -40,20 +32,14 @@ def install(
 ) -> None:
     """Make every simulated boat this kinematic rudder boat until the test ends."""
 
-    def physics_step(self: sim_boat.Boat, t: float, dt: float) -> None:
-        n, e, psi, u = self.state[:4]
-        target = asked_target(self)
-        vc_n, vc_e = self.flow.velocity(n, e, t)
-        demand, r = 0.0, 0.0
-        if target is not None:
-            current_along = math.cos(psi) * vc_n + math.sin(psi) * vc_e
-            demand = target.speed_mps - current_along  # over ground along the heading: the water's share taken off
-            demand = 0.0 if stops_at_zero and target.speed_mps == 0.0 else demand  # Rover's stop controller
-            turn = abs(u) / radius_m
-            r = max(-turn, min(turn, k_per_s * wrap_pi(target.heading_rad - psi)))
-        u += (max(-astern_mps, min(ahead_mps, demand)) - u) * min(1.0, dt / tau_s)
-        psi = wrap_pi(psi + r * dt)
-        n, e = n + (math.cos(psi) * u + vc_n) * dt, e + (math.sin(psi) * u + vc_e) * dt
-        settle(self, (n, e, psi, u, 0.0, r, *self.state[6:]), t, dt)
+    def steer(
+        boat: sim_boat.Boat, target: GuidedTarget | None, psi: float, u: float, current_along: float, dt: float
+    ) -> tuple[float, float]:
+        if target is None:
+            return 0.0, 0.0
+        demand = target.speed_mps - current_along  # over ground along the heading: the water's share taken off
+        demand = 0.0 if stops_at_zero and target.speed_mps == 0.0 else demand  # Rover's stop controller
+        turn = abs(u) / radius_m
+        return demand, max(-turn, min(turn, k_per_s * wrap_pi(target.heading_rad - psi)))
 
-    monkeypatch.setattr(sim_boat.Boat, "physics_step", physics_step)
+    kinematic_hull.install(monkeypatch, steer, tau_s, ahead_mps, astern_mps)

@@ -6,18 +6,10 @@ when the heading error exceeds WP_PIVOT_ANGLE" to hold for guided velocity targe
 Rover's source, where only waypoint navigation pivots): beyond ``pivot_deg`` off the heading asked it stops
 driving and turns in place at ``pivot_rate_dps`` until within ``pivot_exit_deg``; otherwise it turns at
 ``k_per_s`` times the error (at most ``turn_rate_dps``) while its speed loop holds the speed over ground along the
-heading at the speed asked, scaled by the cosine of the heading error (skid steering slows while turning). Its
-speed through the water follows that demand with a first-order lag ``tau_s`` (at most ``ahead_mps`` ahead,
-``astern_mps`` astern); asked 0 it either holds its ground along its heading (no stop controller) or, with
-``stops_at_zero``, lets the water carry it (Rover's stop controller). No sway, no hull dynamics. It reads a guided
-target as Rover does (sitl.guided: heading and signed speed); outside GUIDED, disarmed or without a target it is
-asked nothing and drifts.
-
-It replaces the simulator's boat physics (``sitl.boat.Boat.physics_step``) for the duration of a test; the rest
-is the real thing (the simulated autopilot's modes and setpoint rules, sensors, MAVLink over loopback, the real
-service).
-
-Conventions: NED [m], [m/s], headings [rad] from north; the boat state's body velocities are through the water.
+heading at the speed asked, scaled by the cosine of the heading error (skid steering slows while turning). Asked 0
+it holds its ground along its heading (no stop controller) or, with ``stops_at_zero``, lets the water carry it
+(Rover's stop controller). The hull, its lag ``tau_s`` (at most ``ahead_mps`` ahead, ``astern_mps`` astern) and how
+it reads a guided target: tests/support/kinematic_hull.py.
 """
 
 from __future__ import annotations
@@ -27,8 +19,9 @@ import math
 import pytest
 
 from sitl import boat as sim_boat
+from sitl.guided import GuidedTarget
 from sitl.sensors import wrap_pi
-from tests.support.velocity_follower import asked_target, settle
+from tests.support import kinematic_hull
 
 
 def install(
@@ -48,28 +41,17 @@ def install(
     pivot_rate, turn_rate = math.radians(pivot_rate_dps), math.radians(turn_rate_dps)
     pivoting: dict[int, bool] = {}  # per boat (sysid): a pivot turn is under way
 
-    def physics_step(self: sim_boat.Boat, t: float, dt: float) -> None:
-        n, e, psi, u = self.state[:4]
-        target = asked_target(self)
-        vc_n, vc_e = self.flow.velocity(n, e, t)
-        demand, r = 0.0, 0.0
+    def steer(
+        boat: sim_boat.Boat, target: GuidedTarget | None, psi: float, u: float, current_along: float, dt: float
+    ) -> tuple[float, float]:
         if target is None:
-            pivoting[self.sysid] = False
-        else:
-            error = wrap_pi(target.heading_rad - psi)
-            was = pivoting.get(self.sysid, False)
-            now = abs(error) > (pivot_exit if was else pivot)
-            pivoting[self.sysid] = now
-            if now:
-                r = math.copysign(min(pivot_rate, abs(error) / dt), error)
-            else:
-                r = max(-turn_rate, min(turn_rate, k_per_s * error))
-                current_along = math.cos(psi) * vc_n + math.sin(psi) * vc_e
-                demand = (target.speed_mps - current_along) * max(math.cos(error), 0.0)
-                demand = 0.0 if stops_at_zero and target.speed_mps == 0.0 else demand
-        u += (max(-astern_mps, min(ahead_mps, demand)) - u) * min(1.0, dt / tau_s)
-        psi = wrap_pi(psi + r * dt)
-        n, e = n + (math.cos(psi) * u + vc_n) * dt, e + (math.sin(psi) * u + vc_e) * dt
-        settle(self, (n, e, psi, u, 0.0, r, *self.state[6:]), t, dt)
+            pivoting[boat.sysid] = False
+            return 0.0, 0.0
+        error = wrap_pi(target.heading_rad - psi)
+        pivoting[boat.sysid] = abs(error) > (pivot_exit if pivoting.get(boat.sysid, False) else pivot)
+        if pivoting[boat.sysid]:  # throttle off, turning in place
+            return 0.0, math.copysign(min(pivot_rate, abs(error) / dt), error)
+        demand = 0.0 if stops_at_zero and target.speed_mps == 0.0 else target.speed_mps - current_along
+        return demand * max(math.cos(error), 0.0), max(-turn_rate, min(turn_rate, k_per_s * error))
 
-    monkeypatch.setattr(sim_boat.Boat, "physics_step", physics_step)
+    kinematic_hull.install(monkeypatch, steer, tau_s, ahead_mps, astern_mps)
