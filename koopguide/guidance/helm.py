@@ -77,7 +77,8 @@ class Helm(BoatReading):
 
     def probe(self, t: float, heading_rad: float | None, p_ned: np.ndarray | None = None) -> Command | None:
         """The turn probe's setpoint at the start of guiding (guidance/turn_probe.py), None once it is done."""
-        command = self.turn_probe.command(t, heading_rad, p_ned, self.ability, self.ground_ned)
+        water = None if self.current_ned is None else self.water_mps  # its way through the water, where known
+        command = self.turn_probe.command(t, heading_rad, p_ned, self.ability, self.ground_ned, water)
         if command is not None:
             self.asked_heading, self.doing = self.turn_probe.heading, self.turn_probe.doing
         return command

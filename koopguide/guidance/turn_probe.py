@@ -4,7 +4,12 @@ The service does not know the boat it steers (docs/guidance.md "Any boat"). For 
 sends speed 0 at a heading ``PROBE_RAD`` off the boat's (velocity + yaw; Rover turns a skid-steer boat on the spot,
 a rudder boat not at all):
 
-1. a boat whose heading moves ``PROBE_MOVED_RAD`` turns in place; one whose heading does not move needs way;
+1. a boat whose heading moves ``PROBE_MOVED_RAD`` turns in place, unless, where its way through the water is known,
+   it made way enough for a circle of ``PIVOT_RADIUS_M`` or more: an autopilot that holds the boat's ground at speed
+   0 (no stop controller) keeps way on through a current along the heading, and a rudder boat turns on it (a
+   kinematic rudder boat of a 0.6 m circle, held astern at 0.026 m/s through the water, turned 10 deg in the probe's
+   4 s, was taken to turn in place and followed the field onto a tank's wall: Zshape start 3 toward E, stop 58). One
+   whose heading does not move, or moves on a circle that wide, needs way;
 2. the latter is asked a hard turn under way (``PROBE_WAY_RAD`` off, at ``command.turn_speed_mps``) for as long
    again, which measures its turning circle (estimation/turning.py), to the side whose circle stays more inside the
    area. The whole turn: the circle is the tightest seen in it, and the first reading (1.5 s in, the turn still
@@ -39,7 +44,10 @@ from koopguide.guidance.law.maneuver import unit, wrap_pi
 from koopguide.guidance.settings import CommandSettings
 
 PROBE_RAD = math.radians(60.0)  # the turn in place asked at the start (command.probe_turn_s)
-PROBE_MOVED_RAD = math.radians(10.0)  # the heading moved this much in the probe: the boat turns in place
+PROBE_MOVED_RAD = math.radians(10.0)  # the heading moved this much in the probe: the boat turns in place ...
+PIVOT_RADIUS_M = 0.3  # ... if the way it made through the water meanwhile, over the angle, is less than this: the
+# tightest rudder boat flown turns on 0.6 m (tests/support/kinematic_rudder.py), the simulator's on 0.86-1.3 m; a
+# skid-steer boat held at speed 0 against 0.03 m/s along its heading, pivoting at 6 deg/s, turns on 0.29 m [m]
 PROBE_WAY_RAD = math.radians(90.0)  # ... and the turn under way asked of a boat that needs way, for its circle
 PROBE_CIRCLE_M = 1.5  # ... to the side where a circle this wide stays more inside the area [m]
 PROBE_STOP_S = 2.5  # ... and then a stop under way asked of it, for how far it runs on [s]
@@ -71,6 +79,8 @@ class TurnProbe:
         self.stop_until: float | None = None  # ... the third, a stop under way: until this vehicle time [s]
         self.ground_began: np.ndarray | None = None  # ... its ground velocity as it began [m/s]
         self.sideways_since: float | None = None  # ... in which the boat has gone where it was sent since [s]
+        self.way_m: float | None = 0.0  # the way made through the water in the first stage (None: not known) [m]
+        self.t: float | None = None  # the last call's vehicle time [s]
 
     @property
     def doing(self) -> str:
@@ -84,18 +94,23 @@ class TurnProbe:
         p_ned: np.ndarray | None,
         ability: TurnAbility,
         ground_ned: np.ndarray | None,
+        water_mps: float | None = None,
     ) -> Command | None:
         """The probe's setpoint at vehicle time ``t``, None once done (or off, or no heading known). ``p_ned``: the
         boat's position [m] (None: the turn under way goes to starboard); ``ground_ned``: its velocity over ground
-        [m/s] (None: not known, or at the area's edge, where a wall sets any boat sideways)."""
+        [m/s] (None: not known, or at the area's edge, where a wall sets any boat sideways); ``water_mps``: its way
+        through the water along its heading [m/s] (None: not known, no current estimate yet)."""
         a = ability
         if heading_rad is None or a.pivot_seen or a.moves_sideways:
             return None
+        dt, self.t = (0.0 if self.t is None else max(t - self.t, 0.0)), t
         if self.until is None:
             self.until, self.began = t + self.cfg.probe_turn_s, heading_rad
             self.heading = wrap_pi(heading_rad + PROBE_RAD)
         if not self.with_way:
-            if abs(wrap_pi(heading_rad - self.began)) >= PROBE_MOVED_RAD:
+            self.way_m = None if self.way_m is None or water_mps is None else self.way_m + abs(water_mps) * dt
+            moved = abs(wrap_pi(heading_rad - self.began))
+            if moved >= PROBE_MOVED_RAD and (self.way_m is None or self.way_m < PIVOT_RADIUS_M * moved):
                 a.pivot_seen, a.needs_way = True, False  # it turned without way: it turns in place
                 return None
             if t < self.until:

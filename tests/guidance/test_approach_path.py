@@ -222,6 +222,38 @@ def test_the_turn_probe_tells_a_boat_that_turns_in_place_from_one_that_needs_way
     assert rudder.probe(end_of_turn + PROBE_STOP_S + 0.1, 0.35) is None  # for PROBE_STOP_S
 
 
+@pytest.mark.parametrize(("pivot_dps", "radius_m"), [(20.0, None), (7.0, None), (None, 0.6), (None, 1.2)])
+@pytest.mark.parametrize("toward_deg", [0.0, 180.0])
+def test_the_turn_probe_tells_a_pivot_from_a_rudder_turning_on_the_way_it_holds_its_ground_with(
+    law: GuidanceLaw, pivot_dps: float | None, radius_m: float | None, toward_deg: float
+) -> None:
+    """An autopilot that holds the boat's ground at speed 0 (no stop controller) keeps way on through a current along
+    its heading: 0.03 m/s here, from astern or against the bow. A rudder boat turns on that way, on its circle (a
+    kinematic one of 0.6 m turned 10 deg in the probe's 4 s and was taken to turn in place, stop 58); a skid-steer boat
+    pivots on the spot whatever way it has. With the current known, the way made over the angle tells them apart."""
+    from koopguide.guidance.helm import Helm
+
+    cfg = guidance_settings.load()
+    c = 0.03 * np.array([math.cos(math.radians(toward_deg)), math.sin(math.radians(toward_deg))])
+    helm, heading, dt = Helm(cfg, law), 0.0, 0.05
+    for k in range(round((cfg.command.probe_turn_s + 1.0) / dt)):
+        t = k * dt
+        way = -float(c @ np.array([math.cos(heading), math.sin(heading)]))  # through the water: the ground held
+        asked = helm.turn_probe.heading
+        error = 0.0 if asked is None else wrap_pi(asked - heading)
+        limit = math.radians(pivot_dps) if pivot_dps is not None else abs(way) / radius_m
+        rate = max(-limit, min(limit, 1.5 * error))
+        helm.observe(t, heading, rate, np.zeros(2), c, 0.002)  # over ground: still
+        helm.probe(t, heading)
+        heading = wrap_pi(heading + rate * dt)
+    if pivot_dps is not None:
+        assert helm.ability.pivot_seen and not helm.ability.needs_way
+    else:
+        assert not helm.ability.pivot_seen and helm.ability.needs_way and helm.turn_probe.with_way
+        if radius_m < 1.0:
+            assert abs(heading) >= math.radians(10.0)  # it did turn, on its way through the water
+
+
 def test_a_boat_that_turns_in_place_is_on_station_only_with_its_hull_on_the_currents_line(law: GuidanceLaw) -> None:
     """Arrived across a current, a skid-steer boat turning at 7 deg/s was carried 0.2-0.4 m off while it turned to
     hold: it is on station (may arrive) once its hull lies within facing_deg of the current's line, either end; in

@@ -289,24 +289,42 @@ def test_a_boat_that_holds_its_ground_at_speed_0_is_learned_so() -> None:
     assert lags.rest.holds
 
 
+@pytest.mark.parametrize("from_astern", [False, True])
 @pytest.mark.parametrize("carried", [1.0, 0.6, 0.3])
-def test_a_boat_the_current_carries_at_speed_0_is_never_taken_to_hold_its_ground(carried: float) -> None:
-    """Rover's stop controller puts the throttle off and the current carries the boat back (partly, on a hull that
-    coasts on or a current estimate too strong): however long it is watched."""
+def test_a_boat_the_current_carries_at_speed_0_is_never_taken_to_hold_its_ground(
+    carried: float, from_astern: bool
+) -> None:
+    """Rover's stop controller puts the throttle off and the current carries the boat downstream (partly, on a hull
+    that coasts on or a current estimate too strong), against the bow or from astern: however long it is watched. A
+    boat that goes ahead only, the current from astern, is carried so too."""
+    along = 0.03 if from_astern else -0.03
     lags = BoatLags(PRIOR_S, 1.0)
-    feed_rest(lags, 60.0, -0.03, -carried * 0.03)
+    feed_rest(lags, 60.0, along, carried * along)
     assert not lags.rest.holds
+
+
+def test_a_boat_that_holds_its_ground_at_speed_0_with_the_current_from_astern_is_learned_so() -> None:
+    """Held bow downstream (astern into the current), the autopilot that runs its speed loop on at 0 keeps way on
+    astern and stays: a kinematic rudder boat held 0.35 m upstream of the goal so sat there for 20 s while the hold
+    waited on a drift (stop 58). The same verdict as against the bow."""
+    settle = REST_SETTLE_LAGS * BoatLags(PRIOR_S, 1.0).stopping.lag_s
+    lags = BoatLags(PRIOR_S, 1.0)
+    feed_rest(lags, settle + REST_S - 0.3, 0.03, 0.0)
+    assert not lags.rest.holds
+    lags = BoatLags(PRIOR_S, 1.0)
+    feed_rest(lags, settle + REST_S + 0.2, 0.03, 0.0)
+    assert lags.rest.holds
 
 
 @pytest.mark.parametrize(
     ("current_along", "asked"),
-    [(-0.5 * REST_CURRENT_MPS, 0.0), (0.03, 0.0), (-0.03, 0.05), (-0.03, None)],
+    [(-0.5 * REST_CURRENT_MPS, 0.0), (0.5 * REST_CURRENT_MPS, 0.0), (-0.03, 0.05), (0.03, -0.05), (-0.03, None)],
 )
-def test_no_evidence_of_holding_the_ground_without_a_current_against_the_bow_at_speed_0(
+def test_no_evidence_of_holding_the_ground_without_a_current_along_the_heading_at_speed_0(
     current_along: float, asked: float | None
 ) -> None:
-    """Too little current along the heading to tell, a current from astern (a boat that goes ahead only cannot hold
-    against it), a speed asked, or no request (a wall): the boat that stays where it is shows nothing."""
+    """Too little current along the heading to tell (either way), a speed asked, or no request (a wall): the boat
+    that stays where it is shows nothing."""
     lags = BoatLags(PRIOR_S, 1.0)
     feed_rest(lags, 60.0, current_along, 0.0, asked)
     assert not lags.rest.holds

@@ -69,8 +69,9 @@ STERNWAY_FRACTION = 0.25  # ... or this fraction of the mean sternway asked, if 
 # station keeper the skid-steer one was once taken for a boat that goes ahead only (stop 49's CI)
 REST_SETTLE_LAGS = 3.0  # a speed-0 request is watched from this many stopping lags after it began (the way it had
 # is gone by then: 5% of it) ...
-REST_CURRENT_MPS = 0.015  # ... while the current against the bow is at least this (ahead, holding the ground needs
-# way against it; a boat that goes ahead only cannot hold against a current from astern) [m/s]
+REST_CURRENT_MPS = 0.015  # ... while the current along the heading is at least this, against the bow or from astern
+# (holding the ground needs way against it, astern when it comes from astern: a kinematic rudder boat held bow
+# downstream 0.35 m upstream of the goal at speed 0 sat there for 20 s, the hold waiting on a drift, stop 58) [m/s]
 REST_S = 3.0  # ... and judged each time this much of it has been seen [s]
 REST_CARRY_FRACTION = 0.25  # carried back along its heading by less than this fraction of the current's component
 # along it, the boat holds its ground at rest (Rover's stop controller, stopped from 0.06-0.25 m/s in 0.03 m/s
@@ -176,10 +177,11 @@ class SternwayTrial:
 class RestHold:
     """Whether speed 0 holds the boat's ground along its heading (:attr:`holds`) instead of letting the current carry
     it: taken not to until shown. Speed-0 requests are watched from ``REST_SETTLE_LAGS`` stopping lags after each
-    began, while the current against the bow is at least ``REST_CURRENT_MPS``; each ``REST_S`` of that is a verdict:
-    the boat holds its ground if it was carried back along its heading by less than ``REST_CARRY_FRACTION`` of the
-    current's component along it (then kept for good; else watched again). Not watched in sheared water, where the
-    estimate is no guide to the current at the boat (:meth:`BoatLags.update`)."""
+    began, while the current along the heading is at least ``REST_CURRENT_MPS`` either way; each ``REST_S`` of that is
+    a verdict: the boat holds its ground if it was carried downstream along its heading by less than
+    ``REST_CARRY_FRACTION`` of the current's component along it (then kept for good; else watched again). A boat that
+    goes ahead only is carried by a current from astern, and is never taken to hold its ground by it. Not watched in
+    sheared water, where the estimate is no guide to the current at the boat (:meth:`BoatLags.update`)."""
 
     def __init__(self) -> None:
         self.holds = False
@@ -187,7 +189,7 @@ class RestHold:
         self._t: float | None = None  # the last sample's time [s]
         self._seen_s = 0.0  # watched time [s]
         self._carried_m = 0.0  # ground lost along the heading over it (downstream) [m]
-        self._current_m = 0.0  # the current against the bow, integrated over it [m]
+        self._current_m = 0.0  # the current along the heading, either way, integrated over it [m]
 
     def update(self, t: float, stop: bool, current_along_mps: float, ground_along_mps: float, settle_s: float) -> None:
         """One sample at vehicle time ``t``: whether speed 0 stands (``stop``), the current's component along the
@@ -200,12 +202,13 @@ class RestHold:
             return
         if self._since is None:
             self._since = t
-        if t - self._since < settle_s or current_along_mps > -REST_CURRENT_MPS:
+        if t - self._since < settle_s or abs(current_along_mps) < REST_CURRENT_MPS:
             return
         dt = t - t_last
+        downstream = math.copysign(1.0, current_along_mps)  # along the heading: -1 against the bow, +1 from astern
         self._seen_s += dt
-        self._carried_m -= ground_along_mps * dt
-        self._current_m -= current_along_mps * dt
+        self._carried_m += downstream * ground_along_mps * dt
+        self._current_m += abs(current_along_mps) * dt
         if self._seen_s >= REST_S:
             self.holds = self._carried_m < REST_CARRY_FRACTION * self._current_m
             self._seen_s = self._carried_m = self._current_m = 0.0
