@@ -19,6 +19,7 @@ import pytest
 from koopguide.base import data
 from koopguide.guidance.settings import GuidanceConfig
 from koopguide.harness import mission
+from koopguide.model.learn.export import train_to_file
 from tests.support import kinematic_rudder, kinematic_skid, velocity_follower
 
 pytestmark = pytest.mark.flight  # closed-loop flights: `make test` runs them on two workers (pyproject.toml)
@@ -186,6 +187,27 @@ def test_a_kinematic_rudder_boat_that_holds_its_ground_at_speed_0_arrives_and_ke
     kinematic_rudder.install(monkeypatch, radius_m=radius_m, tau_s=tau_s)
     cfg, result = fly_from_demo_start(zshape_model, 3, toward, f"kinrud{toward}", {"vehicle": "rudder"})
     assert_arrives_and_holds(cfg, result, f"kinematic rudder ({radius_m} m circle, {tau_s} s lag), toward {toward}")
+
+
+@pytest.fixture(scope="module")
+def zshape_model_seed_3(tmp_path_factory: pytest.TempPathFactory, zshape: data.Demonstrations) -> Path:
+    """Zshape trained with the shipped defaults, seed 3: another field than the one the guidance was tuned on."""
+    path = tmp_path_factory.mktemp("models") / "zshape-seed3.pt"
+    train_to_file(zshape, path, seed=3)
+    return path
+
+
+@pytest.mark.timeout(180)
+def test_a_kinematic_rudder_boat_that_holds_its_ground_is_not_taken_for_one_that_pivots(
+    zshape_model_seed_3: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Start 3 in a current toward E heads east, with the current: asked speed 0 in the turn probe, this boat holds
+    its ground with sternway through the water, and turns on it (10 deg in 4 s on its 0.6 m circle). Read as a turn in
+    place, it was guided as a boat that pivots onto the tank's east wall, then held bow downstream upstream of the
+    goal at speed 0, waiting on a drift that never came: on this model 4 of the 7 starts toward E missed (stop 58)."""
+    kinematic_rudder.install(monkeypatch)
+    cfg, result = fly_from_demo_start(zshape_model_seed_3, 3, "E", "kinrud3E", {"vehicle": "rudder"})
+    assert_arrives_and_holds(cfg, result, "kinematic rudder (0.6 m circle), model seed 3, start 3 toward E")
 
 
 @pytest.mark.timeout(180)
