@@ -21,7 +21,7 @@ uniform water gives: none below ``current_shear_onset_mps`` RMS (over ``SLIP_WIN
 that; an innovation-based adaptive filter (Mehra (1970), "On the identification of variances and adaptive Kalman
 filtering", IEEE TAC 15(2); Mohamed & Schwarz (1999), J. Geodesy 73). ``P_seen`` is the covariance of the same
 measurements with the walk in time only: how well the headings flown pin the current down, which decides whether
-the hold may follow the current's line (docs/guidance.md, "Where it fails").
+the hold may follow the current's line (docs/guidance-notes.md, "Where it fails").
 Prior ``c = 0`` with ``current_prior_std_mps``; measurement ``z = v_ground . n(psi)`` with ``H = n(psi)^T``
 and the fix's velocity noise. Measurements while the boat turns faster than ``current_max_turn_dps`` are
 skipped: in a turn the hull does slip sideways through the water, which would read as current. A boat that is

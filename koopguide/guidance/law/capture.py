@@ -35,7 +35,7 @@ at ``circle_speed_mps``) widened to the manoeuvre's speed in inverse proportion,
 had, for ``STEP_S``, its rudder and yaw also take time to come round. The simulator's rudder boat, 0.86 m at
 0.17 m/s, turned 5.6-8.0 deg in a manoeuvre's first 2 s at 0.12 m/s and 9-10 deg in the next, where a 1.0 m model
 said 8-16 and 14; in the double gyre's current at the goal it went on past the goal, each search expecting a turn
-it did not make (docs/guidance.md, stop 51).
+it did not make (docs/guidance-notes.md, "Stop 51").
 
 Rover's command for a manoeuvre: heading ``TURN_RAD`` off the heading it began with (the rudder stays hard over
 for its whole length: the boat turns by at most speed x ``STEP_S`` / R, far less) or that heading itself, at
