@@ -31,6 +31,15 @@ from tests.support.velocity_follower import asked_target, settle
 Steering = Callable[[sim_boat.Boat, GuidedTarget | None, float, float, float, float], tuple[float, float]]
 
 
+def speed_demand(target: GuidedTarget, current_along: float, stops_at_zero: bool) -> float:
+    """The speed through the water [m/s] the autopilot's speed loop asks: the speed over ground asked along the heading
+    less the water's share of it (``current_along``); with ``stops_at_zero`` (Rover's stop controller) none at speed
+    0, throttle off, so the water carries the boat, where without it speed 0 holds the boat's ground."""
+    if stops_at_zero and target.speed_mps == 0.0:
+        return 0.0
+    return target.speed_mps - current_along
+
+
 def install(
     monkeypatch: pytest.MonkeyPatch, steer: Steering, tau_s: float, ahead_mps: float, astern_mps: float
 ) -> None:

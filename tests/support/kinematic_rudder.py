@@ -37,9 +37,8 @@ def install(
     ) -> tuple[float, float]:
         if target is None:
             return 0.0, 0.0
-        demand = target.speed_mps - current_along  # over ground along the heading: the water's share taken off
-        demand = 0.0 if stops_at_zero and target.speed_mps == 0.0 else demand  # Rover's stop controller
-        turn = abs(u) / radius_m
+        turn = abs(u) / radius_m  # no turn without way through the water
+        demand = kinematic_hull.speed_demand(target, current_along, stops_at_zero)
         return demand, max(-turn, min(turn, k_per_s * wrap_pi(target.heading_rad - psi)))
 
     kinematic_hull.install(monkeypatch, steer, tau_s, ahead_mps, astern_mps)

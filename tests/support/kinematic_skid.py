@@ -51,7 +51,7 @@ def install(
         pivoting[boat.sysid] = abs(error) > (pivot_exit if pivoting.get(boat.sysid, False) else pivot)
         if pivoting[boat.sysid]:  # throttle off, turning in place
             return 0.0, math.copysign(min(pivot_rate, abs(error) / dt), error)
-        demand = 0.0 if stops_at_zero and target.speed_mps == 0.0 else target.speed_mps - current_along
+        demand = kinematic_hull.speed_demand(target, current_along, stops_at_zero)
         return demand * max(math.cos(error), 0.0), max(-turn_rate, min(turn_rate, k_per_s * error))
 
     kinematic_hull.install(monkeypatch, steer, tau_s, ahead_mps, astern_mps)
